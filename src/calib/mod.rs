@@ -1,0 +1,215 @@
+//! Calibration: the files in `calib/` (table, physics, strike; the robot
+//! cell joins them later). The repository's `calib/` is compiled in as the
+//! default; `--calib DIR` loads another folder with the same file names,
+//! where each missing file falls back to the compiled default.
+
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+use crate::physics::{PhysicsParams, Propagator, Table};
+
+/// The compiled-in defaults (the repository's `calib/` folder).
+const DEFAULT_PHYSICS: &str = include_str!("../../calib/physics.toml");
+const DEFAULT_TABLE: &str = include_str!("../../calib/table.toml");
+const DEFAULT_STRIKE: &str = include_str!("../../calib/strike.toml");
+
+/// `calib/physics.toml`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PhysicsFile {
+    /// Format version of the file.
+    pub version: u32,
+    pub physics: PhysicsParams,
+}
+
+/// `calib/table.toml`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TableFile {
+    pub version: u32,
+    pub table: Table,
+}
+
+/// Where and how the robot meets the ball (`calib/strike.toml`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct StrikeCalib {
+    /// The hitting plane x = hit_plane_x in the table frame, m.
+    pub hit_plane_x: f64,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct StrikeFile {
+    pub version: u32,
+    pub strike: StrikeCalib,
+}
+
+/// Everything calibrated, loaded and validated.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Calibration {
+    pub physics: PhysicsParams,
+    pub table: Table,
+    pub strike: StrikeCalib,
+}
+
+/// A calibration file that cannot be used.
+#[derive(Debug, thiserror::Error)]
+pub enum CalibError {
+    #[error("cannot read {path}: {source}")]
+    Read {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("{path}: {message}")]
+    Parse { path: PathBuf, message: String },
+    #[error("{path}: {source}")]
+    Invalid {
+        path: PathBuf,
+        source: crate::physics::params::InvalidParam,
+    },
+    #[error("{path}: `{key}` = {value} is out of range")]
+    OutOfRange {
+        path: PathBuf,
+        key: &'static str,
+        value: f64,
+    },
+}
+
+fn parse<T: for<'de> Deserialize<'de>>(text: &str, path: &Path) -> Result<T, CalibError> {
+    toml::from_str(text).map_err(|e| CalibError::Parse {
+        path: path.to_owned(),
+        message: e.message().to_owned()
+            + &e.span()
+                .map(|s| format!(" (at byte {})", s.start))
+                .unwrap_or_default(),
+    })
+}
+
+fn read_or_default(
+    dir: Option<&Path>,
+    name: &str,
+    default: &'static str,
+) -> Result<(String, PathBuf), CalibError> {
+    match dir {
+        Some(d) => {
+            let path = d.join(name);
+            if path.exists() {
+                let text = std::fs::read_to_string(&path).map_err(|source| CalibError::Read {
+                    path: path.clone(),
+                    source,
+                })?;
+                return Ok((text, path));
+            }
+            Ok((
+                default.to_owned(),
+                PathBuf::from(format!("<default>/{name}")),
+            ))
+        }
+        None => Ok((
+            default.to_owned(),
+            PathBuf::from(format!("<default>/{name}")),
+        )),
+    }
+}
+
+impl Calibration {
+    /// The compiled-in calibration (the repository's `calib/`).
+    pub fn default_cell() -> Self {
+        Self::load(None).expect("compiled-in calibration is valid (tested)")
+    }
+
+    /// Loads `dir` (or the compiled defaults with `None`) and validates it.
+    pub fn load(dir: Option<&Path>) -> Result<Self, CalibError> {
+        if let Some(d) = dir
+            && !d.is_dir()
+        {
+            return Err(CalibError::Read {
+                path: d.to_owned(),
+                source: std::io::Error::new(std::io::ErrorKind::NotFound, "not a directory"),
+            });
+        }
+        let (text, path) = read_or_default(dir, "physics.toml", DEFAULT_PHYSICS)?;
+        let physics = parse::<PhysicsFile>(&text, &path)?.physics;
+        physics.validate().map_err(|source| CalibError::Invalid {
+            path: path.clone(),
+            source,
+        })?;
+
+        let (text, path) = read_or_default(dir, "table.toml", DEFAULT_TABLE)?;
+        let table = parse::<TableFile>(&text, &path)?.table;
+        for (key, value) in [
+            ("table.length", table.length),
+            ("table.width", table.width),
+            ("table.net_height", table.net_height),
+            ("table.net_length", table.net_length),
+        ] {
+            if !(value.is_finite() && value > 0.0) {
+                return Err(CalibError::OutOfRange { path, key, value });
+            }
+        }
+
+        let (text, path) = read_or_default(dir, "strike.toml", DEFAULT_STRIKE)?;
+        let strike = parse::<StrikeFile>(&text, &path)?.strike;
+        if !(strike.hit_plane_x.is_finite() && strike.hit_plane_x > 0.0) {
+            return Err(CalibError::OutOfRange {
+                path,
+                key: "strike.hit_plane_x",
+                value: strike.hit_plane_x,
+            });
+        }
+        Ok(Calibration {
+            physics,
+            table,
+            strike,
+        })
+    }
+
+    /// The same cell with the paper's constant physics coefficients.
+    pub fn with_paper_physics(mut self) -> Self {
+        self.physics = PhysicsParams::paper();
+        self
+    }
+
+    /// The propagator for this cell's physics and table.
+    pub fn propagator(&self) -> Propagator {
+        Propagator::new(
+            self.physics.flight_model(),
+            self.physics.bounce_model(),
+            self.table,
+        )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn compiled_defaults_load() {
+        let c = Calibration::default_cell();
+        assert!(c.strike.hit_plane_x > c.table.robot_end_x());
+    }
+
+    #[test]
+    fn a_bad_value_is_named() {
+        let dir = std::env::temp_dir().join(format!("topspin-calib-test-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        std::fs::write(
+            dir.join("strike.toml"),
+            "version = 1\n[strike]\nhit_plane_x = -3.0\n",
+        )
+        .unwrap();
+        let e = Calibration::load(Some(&dir)).unwrap_err().to_string();
+        assert!(e.contains("strike.hit_plane_x"), "{e}");
+        std::fs::write(
+            dir.join("strike.toml"),
+            "version = 1\n[strike]\nhit_plane = 1.6\n",
+        )
+        .unwrap();
+        let e = Calibration::load(Some(&dir)).unwrap_err().to_string();
+        assert!(e.contains("hit_plane"), "{e}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}

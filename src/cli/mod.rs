@@ -1,0 +1,62 @@
+//! The `topspin` command line (DESIGN §8): one module per subcommand, each a
+//! thin shell over the library. Errors that make input unusable exit with
+//! code 2 and one line on stderr naming the problem.
+
+use clap::{Parser, Subcommand};
+
+pub mod eval;
+pub mod fit;
+pub mod sim;
+
+/// Exit code for unusable input (files, configuration, arguments).
+pub const EXIT_BAD_INPUT: i32 = 2;
+
+/// An error that makes the input unusable: reported as one line, exit 2.
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct BadInput(pub String);
+
+#[derive(Debug, Parser)]
+#[command(
+    name = "topspin",
+    version,
+    about = "Table-tennis robot controller that reads and answers spin"
+)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Simulate launcher balls seen by the tracker: CSV + ground truth, or a
+    /// live UDP stream.
+    Sim(sim::SimArgs),
+    /// Spin and prediction for one recorded trajectory (CSV t,x,y,z).
+    Fit(fit::FitArgs),
+    /// Offline evaluations: accuracy tables on simulated and real flights.
+    #[command(subcommand)]
+    Eval(eval::EvalCommand),
+}
+
+/// Runs the command line; returns the process exit code.
+pub fn main() -> i32 {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Sim(a) => sim::run(a),
+        Command::Fit(a) => fit::run(a),
+        Command::Eval(c) => eval::run(c),
+    };
+    match result {
+        Ok(()) => 0,
+        Err(e) => {
+            if let Some(b) = e.downcast_ref::<BadInput>() {
+                eprintln!("topspin: {b}");
+                EXIT_BAD_INPUT
+            } else {
+                eprintln!("topspin: {e:#}");
+                1
+            }
+        }
+    }
+}

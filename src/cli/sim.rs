@@ -1,0 +1,5 @@
+#[derive(Debug, clap::Args)]
+pub struct SimArgs {}
+pub fn run(_a: SimArgs) -> anyhow::Result<()> {
+    todo!()
+}

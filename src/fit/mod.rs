@@ -1,0 +1,1 @@
+//! Spin from a trajectory and prediction (paper §IV).

@@ -1,0 +1,26 @@
+//! topspin: a table-tennis robot controller that reads and answers spin
+//! (after Tebbe et al., "Spin Detection in Robotic Table Tennis", ICRA 2020).
+//!
+//! The layers, bottom up:
+//!
+//! - [`time`]: the `Instant` every algorithm takes as an argument; nothing
+//!   below the runtime reads a clock.
+//! - [`physics`]: flight model (drag, Magnus, gravity), table, bounce, and a
+//!   fixed-step RK4 propagator with events.
+//! - [`fit`]: spin from a trajectory — the paper's polynomial/Magnus fit with
+//!   its outlier filter, and a flight-model refinement — and prediction of
+//!   the bounce and the hitting point.
+//! - [`sim`]: a seeded ball launcher and tracker model that produce
+//!   realistic observations with ground truth.
+//! - [`wire`]: the datagram codecs (checked view over bytes, validated value).
+//! - [`calib`]: the calibration files in `calib/`.
+//! - [`cli`]: the `topspin` command line.
+
+pub mod calib;
+pub mod cli;
+pub mod fit;
+pub mod physics;
+pub mod plan;
+pub mod sim;
+pub mod time;
+pub mod wire;

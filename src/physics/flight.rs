@@ -1,0 +1,169 @@
+//! The flight model: dv/dt = −k_D‖v‖v + k_M(S)·(ω × v) − g e_z.
+//!
+//! k_D = C_D ρ A / (2m) (the paper prints it with a stray minus sign; drag
+//! opposes motion). The Magnus coefficient k_M = C_M ρ A r / (2m) may fall
+//! with the spin parameter S = r‖ω‖/‖v‖, as measured for real balls
+//! ([`LiftModel::Saturating`]); the paper's constant is
+//! [`LiftModel::Constant`]. Spin is constant during flight.
+
+use serde::{Deserialize, Serialize};
+
+use super::{PhysicsParams, Vec3};
+
+/// How the Magnus coefficient depends on the spin parameter S = r‖ω‖/‖v‖.
+#[derive(Copy, Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "model", rename_all = "snake_case", deny_unknown_fields)]
+pub enum LiftModel {
+    /// The paper's model: C_M constant, so the lift force grows linearly
+    /// with ‖ω‖.
+    Constant { c_m: f64 },
+    /// C_M(S) = c_m / (1 + S / s_half): linear in ω at low spin, saturating
+    /// at high spin (S ≫ s_half). Sawicki et al.'s C_L = S/(1 + 2S) is the
+    /// member c_m = 1, s_half = 0.5.
+    Saturating { c_m: f64, s_half: f64 },
+}
+
+impl LiftModel {
+    /// C_M at spin parameter `s`.
+    pub fn c_m(&self, s: f64) -> f64 {
+        match *self {
+            LiftModel::Constant { c_m } => c_m,
+            LiftModel::Saturating { c_m, s_half } => c_m / (1.0 + s / s_half),
+        }
+    }
+
+    /// C_M at vanishing spin.
+    pub fn c_m0(&self) -> f64 {
+        match *self {
+            LiftModel::Constant { c_m } | LiftModel::Saturating { c_m, .. } => c_m,
+        }
+    }
+}
+
+/// The ball's equation of motion with its coefficients precomputed.
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub struct FlightModel {
+    k_d: f64,
+    /// ρ A r / (2m): multiply by C_M to get k_M.
+    lift_scale: f64,
+    lift: LiftModel,
+    radius: f64,
+    gravity: f64,
+}
+
+impl FlightModel {
+    pub fn new(p: &PhysicsParams) -> Self {
+        let area = std::f64::consts::PI * p.radius * p.radius;
+        FlightModel {
+            k_d: p.drag_coefficient * p.air_density * area / (2.0 * p.mass),
+            lift_scale: p.air_density * area * p.radius / (2.0 * p.mass),
+            lift: p.lift,
+            radius: p.radius,
+            gravity: p.gravity,
+        }
+    }
+
+    /// Drag coefficient k_D in 1/m.
+    pub fn k_d(&self) -> f64 {
+        self.k_d
+    }
+
+    /// Magnus coefficient at vanishing spin, k_M(0).
+    pub fn k_m0(&self) -> f64 {
+        self.lift_scale * self.lift.c_m0()
+    }
+
+    /// Magnus coefficient k_M at the given velocity and spin.
+    pub fn k_m(&self, vel: &Vec3, spin: &Vec3) -> f64 {
+        match self.lift {
+            LiftModel::Constant { c_m } => self.lift_scale * c_m,
+            LiftModel::Saturating { .. } => {
+                let speed = vel.norm();
+                let s = if speed > 1e-9 {
+                    self.radius * spin.norm() / speed
+                } else {
+                    0.0
+                };
+                self.lift_scale * self.lift.c_m(s)
+            }
+        }
+    }
+
+    pub fn lift(&self) -> LiftModel {
+        self.lift
+    }
+
+    pub fn radius(&self) -> f64 {
+        self.radius
+    }
+
+    pub fn gravity(&self) -> f64 {
+        self.gravity
+    }
+
+    /// The ball's acceleration at velocity `vel` with spin `spin`.
+    #[inline]
+    pub fn accel(&self, vel: &Vec3, spin: &Vec3) -> Vec3 {
+        let speed = vel.norm();
+        let mut a = vel * (-self.k_d * speed) + spin.cross(vel) * self.k_m(vel, spin);
+        a.z -= self.gravity;
+        a
+    }
+
+    /// The spin whose Magnus acceleration under this model equals that of
+    /// `spin_linear` under the constant coefficient k_M(0) at speed `speed`
+    /// (same direction, magnitude corrected for lift saturation). This maps
+    /// a spin solved linearly with k_M(0), as in the paper's fit, onto this
+    /// model. Returns `None` where no finite spin produces that much lift.
+    pub fn spin_from_linear(&self, spin_linear: &Vec3, speed: f64) -> Option<Vec3> {
+        match self.lift {
+            LiftModel::Constant { .. } => Some(*spin_linear),
+            LiftModel::Saturating { s_half, .. } => {
+                // |ω| / (1 + r|ω|/(v s_half)) = m  ⇒  |ω| = m / (1 − r m / (v s_half))
+                let m = spin_linear.norm();
+                let denom = 1.0 - self.radius * m / (speed.max(1e-9) * s_half);
+                (denom > 1e-3).then(|| spin_linear / denom)
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn drag_opposes_motion_and_gravity_pulls_down() {
+        let m = PhysicsParams::paper().flight_model();
+        let a = m.accel(&Vec3::new(5.0, 0.0, 0.0), &Vec3::zeros());
+        assert!(a.x < 0.0);
+        assert!((a.x + m.k_d() * 25.0).abs() < 1e-12);
+        assert_eq!(a.z, -9.81);
+    }
+
+    #[test]
+    fn topspin_pushes_down_backspin_lifts() {
+        let m = PhysicsParams::paper().flight_model();
+        let v = Vec3::new(6.0, 0.0, 0.0);
+        let top = m.accel(&v, &Vec3::new(0.0, 300.0, 0.0));
+        let back = m.accel(&v, &Vec3::new(0.0, -300.0, 0.0));
+        assert!(top.z < -9.81 && back.z > -9.81);
+    }
+
+    #[test]
+    fn saturating_lift_inverts_the_linear_spin() {
+        let mut p = PhysicsParams::paper();
+        p.lift = LiftModel::Saturating {
+            c_m: 0.6,
+            s_half: 0.4,
+        };
+        let m = p.flight_model();
+        let v = Vec3::new(7.0, 0.0, 1.0);
+        let w = Vec3::new(10.0, -400.0, 30.0);
+        // Magnus acceleration of w under the saturating model, expressed as
+        // an equivalent spin under the constant k_M(0):
+        let w_lin = w * (m.k_m(&v, &w) / m.k_m0());
+        let back = m.spin_from_linear(&w_lin, v.norm()).unwrap();
+        assert!((back - w).norm() < 1e-9);
+    }
+}

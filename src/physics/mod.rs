@@ -1,0 +1,53 @@
+//! Ball physics in the table frame T (DESIGN §2, §3): the flight model
+//! (drag, Magnus lift, gravity), the table and net, the table bounce, and a
+//! fixed-step RK4 propagator that stops at events (bounce, net, hitting
+//! plane). Pure functions of their inputs: no clock, no I/O, no allocation.
+
+pub mod bounce;
+pub mod flight;
+pub mod params;
+pub mod propagate;
+pub mod table;
+
+pub use bounce::BounceModel;
+pub use flight::{FlightModel, LiftModel};
+pub use params::PhysicsParams;
+pub use propagate::{Event, Propagator, StopAt};
+pub use table::Table;
+
+/// A 3-vector in SI units in the table frame.
+pub type Vec3 = nalgebra::Vector3<f64>;
+
+/// Everything that determines a ball's future: position (m), velocity
+/// (m/s) and spin (rad/s), all in the table frame.
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub struct BallState {
+    pub pos: Vec3,
+    pub vel: Vec3,
+    pub spin: Vec3,
+}
+
+impl BallState {
+    pub fn new(pos: Vec3, vel: Vec3, spin: Vec3) -> Self {
+        BallState { pos, vel, spin }
+    }
+
+    /// True when every component is finite.
+    pub fn is_finite(&self) -> bool {
+        self.pos
+            .iter()
+            .chain(self.vel.iter())
+            .chain(self.spin.iter())
+            .all(|c| c.is_finite())
+    }
+}
+
+/// Revolutions per second from rad/s.
+pub fn rad_to_rps(w: f64) -> f64 {
+    w / std::f64::consts::TAU
+}
+
+/// rad/s from revolutions per second.
+pub fn rps_to_rad(rps: f64) -> f64 {
+    rps * std::f64::consts::TAU
+}

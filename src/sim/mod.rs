@@ -1,0 +1,1 @@
+//! Simulated launcher and tracker.
