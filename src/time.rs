@@ -25,11 +25,7 @@ impl Instant {
     /// The instant `s` seconds after the epoch (negative or non-finite
     /// values saturate to the epoch).
     pub fn from_secs_f64(s: f64) -> Self {
-        if s.is_finite() && s > 0.0 {
-            Instant((s * 1e9).round() as u64)
-        } else {
-            Instant(0)
-        }
+        if s.is_finite() && s > 0.0 { Instant((s * 1e9).round() as u64) } else { Instant(0) }
     }
 
     /// Seconds since the epoch.

@@ -58,59 +58,34 @@ pub struct Calibration {
 #[derive(Debug, thiserror::Error)]
 pub enum CalibError {
     #[error("cannot read {path}: {source}")]
-    Read {
-        path: PathBuf,
-        source: std::io::Error,
-    },
+    Read { path: PathBuf, source: std::io::Error },
     #[error("{path}: {message}")]
     Parse { path: PathBuf, message: String },
     #[error("{path}: {source}")]
-    Invalid {
-        path: PathBuf,
-        source: crate::physics::params::InvalidParam,
-    },
+    Invalid { path: PathBuf, source: crate::physics::params::InvalidParam },
     #[error("{path}: `{key}` = {value} is out of range")]
-    OutOfRange {
-        path: PathBuf,
-        key: &'static str,
-        value: f64,
-    },
+    OutOfRange { path: PathBuf, key: &'static str, value: f64 },
 }
 
 fn parse<T: for<'de> Deserialize<'de>>(text: &str, path: &Path) -> Result<T, CalibError> {
     toml::from_str(text).map_err(|e| CalibError::Parse {
         path: path.to_owned(),
-        message: e.message().to_owned()
-            + &e.span()
-                .map(|s| format!(" (at byte {})", s.start))
-                .unwrap_or_default(),
+        message: e.message().to_owned() + &e.span().map(|s| format!(" (at byte {})", s.start)).unwrap_or_default(),
     })
 }
 
-fn read_or_default(
-    dir: Option<&Path>,
-    name: &str,
-    default: &'static str,
-) -> Result<(String, PathBuf), CalibError> {
+fn read_or_default(dir: Option<&Path>, name: &str, default: &'static str) -> Result<(String, PathBuf), CalibError> {
     match dir {
         Some(d) => {
             let path = d.join(name);
             if path.exists() {
-                let text = std::fs::read_to_string(&path).map_err(|source| CalibError::Read {
-                    path: path.clone(),
-                    source,
-                })?;
+                let text =
+                    std::fs::read_to_string(&path).map_err(|source| CalibError::Read { path: path.clone(), source })?;
                 return Ok((text, path));
             }
-            Ok((
-                default.to_owned(),
-                PathBuf::from(format!("<default>/{name}")),
-            ))
+            Ok((default.to_owned(), PathBuf::from(format!("<default>/{name}"))))
         }
-        None => Ok((
-            default.to_owned(),
-            PathBuf::from(format!("<default>/{name}")),
-        )),
+        None => Ok((default.to_owned(), PathBuf::from(format!("<default>/{name}")))),
     }
 }
 
@@ -132,10 +107,7 @@ impl Calibration {
         }
         let (text, path) = read_or_default(dir, "physics.toml", DEFAULT_PHYSICS)?;
         let physics = parse::<PhysicsFile>(&text, &path)?.physics;
-        physics.validate().map_err(|source| CalibError::Invalid {
-            path: path.clone(),
-            source,
-        })?;
+        physics.validate().map_err(|source| CalibError::Invalid { path: path.clone(), source })?;
 
         let (text, path) = read_or_default(dir, "table.toml", DEFAULT_TABLE)?;
         let table = parse::<TableFile>(&text, &path)?.table;
@@ -153,17 +125,9 @@ impl Calibration {
         let (text, path) = read_or_default(dir, "strike.toml", DEFAULT_STRIKE)?;
         let strike = parse::<StrikeFile>(&text, &path)?.strike;
         if !(strike.hit_plane_x.is_finite() && strike.hit_plane_x > 0.0) {
-            return Err(CalibError::OutOfRange {
-                path,
-                key: "strike.hit_plane_x",
-                value: strike.hit_plane_x,
-            });
+            return Err(CalibError::OutOfRange { path, key: "strike.hit_plane_x", value: strike.hit_plane_x });
         }
-        Ok(Calibration {
-            physics,
-            table,
-            strike,
-        })
+        Ok(Calibration { physics, table, strike })
     }
 
     /// The same cell with the paper's constant physics coefficients.
@@ -174,11 +138,7 @@ impl Calibration {
 
     /// The propagator for this cell's physics and table.
     pub fn propagator(&self) -> Propagator {
-        Propagator::new(
-            self.physics.flight_model(),
-            self.physics.bounce_model(),
-            self.table,
-        )
+        Propagator::new(self.physics.flight_model(), self.physics.bounce_model(), self.table)
     }
 }
 
@@ -196,18 +156,10 @@ mod tests {
     fn a_bad_value_is_named() {
         let dir = std::env::temp_dir().join(format!("topspin-calib-test-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
-        std::fs::write(
-            dir.join("strike.toml"),
-            "version = 1\n[strike]\nhit_plane_x = -3.0\n",
-        )
-        .unwrap();
+        std::fs::write(dir.join("strike.toml"), "version = 1\n[strike]\nhit_plane_x = -3.0\n").unwrap();
         let e = Calibration::load(Some(&dir)).unwrap_err().to_string();
         assert!(e.contains("strike.hit_plane_x"), "{e}");
-        std::fs::write(
-            dir.join("strike.toml"),
-            "version = 1\n[strike]\nhit_plane = 1.6\n",
-        )
-        .unwrap();
+        std::fs::write(dir.join("strike.toml"), "version = 1\n[strike]\nhit_plane = 1.6\n").unwrap();
         let e = Calibration::load(Some(&dir)).unwrap_err().to_string();
         assert!(e.contains("hit_plane"), "{e}");
         std::fs::remove_dir_all(&dir).unwrap();

@@ -59,16 +59,12 @@ pub fn read_samples(path: &Path) -> Result<Vec<Sample>, BadInput> {
         .trim(csv::Trim::All)
         .from_path(path)
         .map_err(|e| BadInput(format!("{name}: {}", io_reason(&e))))?;
-    let headers = reader
-        .headers()
-        .map_err(|e| BadInput(format!("{name}: {e}")))?
-        .clone();
+    let headers = reader.headers().map_err(|e| BadInput(format!("{name}: {e}")))?.clone();
     let column = |key: &str| {
-        headers.iter().position(|h| h == key).ok_or_else(|| {
-            BadInput(format!(
-                "{name}: header has no column `{key}` (expected t,x,y,z)"
-            ))
-        })
+        headers
+            .iter()
+            .position(|h| h == key)
+            .ok_or_else(|| BadInput(format!("{name}: header has no column `{key}` (expected t,x,y,z)")))
     };
     let cols = [column("t")?, column("x")?, column("y")?, column("z")?];
     let mut samples = Vec::new();
@@ -77,13 +73,11 @@ pub fn read_samples(path: &Path) -> Result<Vec<Sample>, BadInput> {
         let mut v = [0.0; 4];
         for (k, &c) in cols.iter().enumerate() {
             let text = record.get(c).unwrap_or("");
-            v[k] = text.parse::<f64>().map_err(|_| {
-                BadInput(format!("{name}: data row {row}: `{text}` is not a number"))
-            })?;
+            v[k] = text
+                .parse::<f64>()
+                .map_err(|_| BadInput(format!("{name}: data row {row}: `{text}` is not a number")))?;
             if !v[k].is_finite() {
-                return Err(BadInput(format!(
-                    "{name}: data row {row}: non-finite value `{text}`"
-                )));
+                return Err(BadInput(format!("{name}: data row {row}: non-finite value `{text}`")));
             }
         }
         samples.push(Sample::new(v[0], Vec3::new(v[1], v[2], v[3])));
@@ -99,10 +93,7 @@ fn io_reason(e: &csv::Error) -> String {
 }
 
 /// Loads the calibration named by `--calib` and `--physics`.
-pub fn load_calibration(
-    dir: Option<&Path>,
-    physics: PhysicsChoice,
-) -> Result<Calibration, BadInput> {
+pub fn load_calibration(dir: Option<&Path>, physics: PhysicsChoice) -> Result<Calibration, BadInput> {
     let cal = Calibration::load(dir).map_err(|e| BadInput(e.to_string()))?;
     Ok(match physics {
         PhysicsChoice::Calibrated => cal,
@@ -191,11 +182,7 @@ fn summary(fit: &TrajectoryFit, hit_plane_x: f64) -> String {
     );
     match fit.prediction.bounce {
         Some(c) => {
-            let _ = writeln!(
-                out,
-                "bounce      t={:.4}  x={:.3} y={:.3} m",
-                c.t, c.pos.x, c.pos.y
-            );
+            let _ = writeln!(out, "bounce      t={:.4}  x={:.3} y={:.3} m", c.t, c.pos.x, c.pos.y);
         }
         None => out.push_str("bounce      none predicted\n"),
     }
@@ -208,11 +195,7 @@ fn summary(fit: &TrajectoryFit, hit_plane_x: f64) -> String {
             );
         }
         None => {
-            let _ = writeln!(
-                out,
-                "hit         none (flight ends: {:?})",
-                fit.prediction.end
-            );
+            let _ = writeln!(out, "hit         none (flight ends: {:?})", fit.prediction.end);
         }
     }
     let _ = writeln!(

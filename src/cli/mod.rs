@@ -17,11 +17,7 @@ pub const EXIT_BAD_INPUT: i32 = 2;
 pub struct BadInput(pub String);
 
 #[derive(Debug, Parser)]
-#[command(
-    name = "topspin",
-    version,
-    about = "Table-tennis robot controller that reads and answers spin"
-)]
+#[command(name = "topspin", version, about = "Table-tennis robot controller that reads and answers spin")]
 pub struct Cli {
     #[command(subcommand)]
     pub command: Command,

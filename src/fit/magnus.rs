@@ -22,11 +22,7 @@ pub struct MagnusSolve {
 
 /// Solves for ω over the sample times `times` (at least two, with the
 /// velocity turning, for a unique answer). `None` if singular.
-pub fn solve(
-    cubic: &Cubic,
-    times: impl Iterator<Item = f64>,
-    model: &FlightModel,
-) -> Option<MagnusSolve> {
+pub fn solve(cubic: &Cubic, times: impl Iterator<Item = f64>, model: &FlightModel) -> Option<MagnusSolve> {
     let k_m = model.k_m0();
     let k_d = model.k_d();
     let g = Vec3::new(0.0, 0.0, model.gravity());
@@ -35,12 +31,14 @@ pub fn solve(
     let (mut speed_sum, mut n) = (0.0, 0usize);
     for t in times {
         let v = cubic.vel(t);
-        let a = cubic.acc(t) + v * (k_d * v.norm()) + g;
-        // ω × v = −[v]× ω
-        let m = -v.cross_matrix() * k_m;
-        mtm += m.transpose() * m;
-        mta += m.transpose() * a;
-        speed_sum += v.norm();
+        let speed = v.norm();
+        let a = cubic.acc(t) + v * (k_d * speed) + g;
+        // Row block M = −k_M [v]×  (ω × v = −[v]× ω), so
+        // MᵀM = k_M² (‖v‖² I − v vᵀ) and Mᵀa = k_M (v × a).
+        let vv = speed * speed;
+        mtm += (Matrix3::from_diagonal_element(vv) - v * v.transpose()) * (k_m * k_m);
+        mta += v.cross(&a) * k_m;
+        speed_sum += speed;
         n += 1;
     }
     if n == 0 {
@@ -50,14 +48,11 @@ pub fn solve(
     // (the component of ω along v is then unobservable and comes out 0).
     let ridge = mtm.trace() * 1e-9 + 1e-12;
     let spin_linear = (mtm + Matrix3::identity() * ridge).cholesky()?.solve(&mta);
-    spin_linear
-        .iter()
-        .all(|c| c.is_finite())
-        .then_some(MagnusSolve {
-            spin_linear,
-            normal: mtm,
-            mean_speed: speed_sum / n as f64,
-        })
+    spin_linear.iter().all(|c| c.is_finite()).then_some(MagnusSolve {
+        spin_linear,
+        normal: mtm,
+        mean_speed: speed_sum / n as f64,
+    })
 }
 
 #[cfg(test)]

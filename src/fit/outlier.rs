@@ -40,11 +40,7 @@ pub struct StartFilter {
 
 impl Default for StartFilter {
     fn default() -> Self {
-        StartFilter {
-            noise: 0.002,
-            n_sigma: 5.0,
-            model_allowance: 0.005,
-        }
+        StartFilter { noise: 0.002, n_sigma: 5.0, model_allowance: 0.005 }
     }
 }
 
@@ -65,8 +61,7 @@ impl StartFilter {
                 continue;
             };
             let miss = (predicted - s.pos).norm();
-            let limit =
-                self.n_sigma * self.noise * (1.0 + variance_factor).sqrt() + self.model_allowance;
+            let limit = self.n_sigma * self.noise * (1.0 + variance_factor).sqrt() + self.model_allowance;
             if miss <= limit {
                 window.rotate_right(1);
                 window[0] = candidate;
@@ -115,11 +110,7 @@ mod tests {
         let prop = Propagator::new(p.flight_model(), p.bounce_model(), Table::default());
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
         let n = Normal::new(0.0, noise).unwrap();
-        let mut s = BallState::new(
-            Vec3::new(-1.5, 0.0, 0.3),
-            Vec3::new(7.0, 0.3, 1.0),
-            Vec3::new(0.0, 300.0, 0.0),
-        );
+        let mut s = BallState::new(Vec3::new(-1.5, 0.0, 0.3), Vec3::new(7.0, 0.3, 1.0), Vec3::new(0.0, 300.0, 0.0));
         (0..40)
             .map(|i| {
                 let out = Sample::new(
@@ -137,11 +128,7 @@ mod tests {
         let f = StartFilter::default();
         for seed in 0..50 {
             let s = flight(0.002, seed);
-            assert!(
-                f.outliers(&s).is_empty(),
-                "seed {seed}: {:?}",
-                f.outliers(&s)
-            );
+            assert!(f.outliers(&s).is_empty(), "seed {seed}: {:?}", f.outliers(&s));
         }
     }
 

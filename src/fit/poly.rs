@@ -13,8 +13,6 @@ pub struct Cubic {
     t_mid: f64,
     half_span: f64,
     coef: [Vec3; 4],
-    /// (ΦᵀΦ)⁻¹ of the fit, for prediction variances.
-    inv_normal: Matrix4<f64>,
 }
 
 impl Cubic {
@@ -50,31 +48,12 @@ impl Cubic {
                 coef[k][axis] = c[k];
             }
         }
-        let inv_normal = chol.inverse();
-        let cubic = Cubic {
-            t_mid,
-            half_span,
-            coef,
-            inv_normal,
-        };
-        cubic
-            .coef
-            .iter()
-            .all(|c| c.iter().all(|v| v.is_finite()))
-            .then_some(cubic)
+        let cubic = Cubic { t_mid, half_span, coef };
+        cubic.coef.iter().all(|c| c.iter().all(|v| v.is_finite())).then_some(cubic)
     }
 
     fn tau(&self, t: f64) -> f64 {
         (t - self.t_mid) / self.half_span
-    }
-
-    /// φ(t)ᵀ(ΦᵀΦ)⁻¹φ(t): the variance of P(t) in units of the per-axis
-    /// observation noise variance (small inside the samples, growing fast
-    /// outside them).
-    pub fn variance_factor(&self, t: f64) -> f64 {
-        let x = self.tau(t);
-        let phi = Vector4::new(1.0, x, x * x, x * x * x);
-        (phi.transpose() * self.inv_normal * phi)[0]
     }
 
     /// P(t).
@@ -105,16 +84,8 @@ mod tests {
 
     #[test]
     fn recovers_an_exact_cubic() {
-        let p = |t: f64| {
-            Vec3::new(
-                1.0 + 2.0 * t - t * t + 0.5 * t * t * t,
-                -t,
-                3.0 - 4.9 * t * t,
-            )
-        };
-        let samples: Vec<Sample> = (0..30)
-            .map(|i| Sample::new(10.0 + i as f64 * 0.01, p(i as f64 * 0.01)))
-            .collect();
+        let p = |t: f64| Vec3::new(1.0 + 2.0 * t - t * t + 0.5 * t * t * t, -t, 3.0 - 4.9 * t * t);
+        let samples: Vec<Sample> = (0..30).map(|i| Sample::new(10.0 + i as f64 * 0.01, p(i as f64 * 0.01))).collect();
         let c = Cubic::fit(samples.iter()).unwrap();
         let t = 10.13;
         let x = 0.13;

@@ -53,11 +53,7 @@ pub struct Prediction {
 /// crossing of the plane x = `hit_plane_x` towards +x (after at most one
 /// bounce).
 pub fn predict(prop: &Propagator, state: &BallState, t: f64, hit_plane_x: f64) -> Prediction {
-    let stop = StopAt {
-        t_max: t + PREDICTION_HORIZON,
-        hit_plane_x: Some(hit_plane_x),
-        net: true,
-    };
+    let stop = StopAt { t_max: t + PREDICTION_HORIZON, hit_plane_x: Some(hit_plane_x), net: true };
     let (mut s, mut now) = (*state, t);
     let mut bounce = None;
     let end = loop {
@@ -66,28 +62,15 @@ pub fn predict(prop: &Propagator, state: &BallState, t: f64, hit_plane_x: f64) -
                 if bounce.is_some() {
                     break FlightEnd::SecondBounce;
                 }
-                bounce = Some(Contact {
-                    t,
-                    pos: before.pos,
-                    before,
-                    after: s,
-                });
+                bounce = Some(Contact { t, pos: before.pos, before, after: s });
             }
             Event::HitPlane { t } => {
-                return Prediction {
-                    bounce,
-                    hit: Some(HitPoint { t, state: s }),
-                    end: FlightEnd::HitPlane,
-                };
+                return Prediction { bounce, hit: Some(HitPoint { t, state: s }), end: FlightEnd::HitPlane };
             }
             Event::Net { .. } => break FlightEnd::Net,
             Event::Floor { .. } => break FlightEnd::Floor,
             Event::TimeLimit { .. } => break FlightEnd::Horizon,
         }
     };
-    Prediction {
-        bounce,
-        hit: None,
-        end,
-    }
+    Prediction { bounce, hit: None, end }
 }

@@ -123,55 +123,30 @@ fn huber(r: f64, k: f64) -> f64 {
 
 /// Refines `init` (the state at `samples[0].t`) against `samples`
 /// (time-ordered, at least 4).
-pub fn refine(
-    samples: &[Sample],
-    init: &BallState,
-    prop: &Propagator,
-    cfg: &RefineConfig,
-) -> Refined {
+pub fn refine(samples: &[Sample], init: &BallState, prop: &Propagator, cfg: &RefineConfig) -> Refined {
     let n = samples.len();
     let sigma = cfg.noise.max(1e-5);
-    let mut theta = V9::from_iterator(
-        init.pos
-            .iter()
-            .chain(init.vel.iter())
-            .chain(init.spin.iter())
-            .copied(),
-    );
+    let mut theta = V9::from_iterator(init.pos.iter().chain(init.vel.iter()).chain(init.spin.iter()).copied());
     let mut keep = vec![true; n];
 
     // The flight direction at the first sample, where the spin was imparted.
-    let along = if init.vel.norm() > 1e-6 {
-        init.vel.normalize()
-    } else {
-        Vec3::x()
-    };
+    let along = if init.vel.norm() > 1e-6 { init.vel.normalize() } else { Vec3::x() };
     let mut prior = M9::zeros();
     let p_along = along * along.transpose() / (cfg.prior_along_velocity * cfg.prior_along_velocity);
     let p_abs = nalgebra::Matrix3::identity() / (cfg.prior_spin * cfg.prior_spin);
-    prior
-        .fixed_view_mut::<3, 3>(6, 6)
-        .copy_from(&(p_along + p_abs));
+    prior.fixed_view_mut::<3, 3>(6, 6).copy_from(&(p_along + p_abs));
 
     let weights = |theta: &V9, keep: &[bool], out: &mut Vec<f64>| {
         out.clear();
         out.resize(n, 0.0);
         residuals(prop, samples, theta, |i, r| {
-            out[i] = if keep[i] {
-                huber(r.norm() / sigma, cfg.huber_k)
-            } else {
-                0.0
-            };
+            out[i] = if keep[i] { huber(r.norm() / sigma, cfg.huber_k) } else { 0.0 };
         });
     };
     let cost = |theta: &V9, w: &[f64]| {
         let mut c = 0.0;
-        residuals(prop, samples, theta, |i, r| {
-            c += w[i] * r.norm_squared() / (sigma * sigma)
-        });
-        c + (theta.fixed_rows::<3>(6).transpose()
-            * prior.fixed_view::<3, 3>(6, 6)
-            * theta.fixed_rows::<3>(6))[0]
+        residuals(prop, samples, theta, |i, r| c += w[i] * r.norm_squared() / (sigma * sigma));
+        c + (theta.fixed_rows::<3>(6).transpose() * prior.fixed_view::<3, 3>(6, 6) * theta.fixed_rows::<3>(6))[0]
     };
 
     let mut w = Vec::with_capacity(n);
@@ -279,9 +254,7 @@ pub fn refine(
     // Scale the information by the noise actually seen (per-axis σ̂ ≈ rms/√3).
     let sigma_hat = (rms / 3f64.sqrt()).max(1e-6);
     let scale = (sigma * sigma) / (sigma_hat * sigma_hat);
-    let cov = (info * scale + prior)
-        .try_inverse()
-        .unwrap_or_else(|| M9::from_diagonal_element(f64::INFINITY));
+    let cov = (info * scale + prior).try_inverse().unwrap_or_else(|| M9::from_diagonal_element(f64::INFINITY));
     let spin_std = Vec3::new(cov[(6, 6)].sqrt(), cov[(7, 7)].sqrt(), cov[(8, 8)].sqrt());
     // Data-only information about ω with position and velocity marginalised.
     let i_xx = info.fixed_view::<6, 6>(0, 0).into_owned();
@@ -293,31 +266,10 @@ pub fn refine(
             let eig = nalgebra::SymmetricEigen::new(schur);
             let k = eig.eigenvalues.imin();
             let lam = eig.eigenvalues[k];
-            (
-                eig.eigenvectors.column(k).into_owned(),
-                if lam > 0.0 {
-                    lam.sqrt().recip()
-                } else {
-                    f64::INFINITY
-                },
-            )
+            (eig.eigenvectors.column(k).into_owned(), if lam > 0.0 { lam.sqrt().recip() } else { f64::INFINITY })
         }
         None => (along, f64::INFINITY),
     };
-    let outliers = keep
-        .iter()
-        .enumerate()
-        .filter(|(_, k)| !**k)
-        .map(|(i, _)| i)
-        .collect();
-    Refined {
-        t0: samples[0].t,
-        state: to_state(&theta),
-        spin_std,
-        weak_axis,
-        weak_axis_std,
-        rms,
-        outliers,
-        iterations,
-    }
+    let outliers = keep.iter().enumerate().filter(|(_, k)| !**k).map(|(i, _)| i).collect();
+    Refined { t0: samples[0].t, state: to_state(&theta), spin_std, weak_axis, weak_axis_std, rms, outliers, iterations }
 }

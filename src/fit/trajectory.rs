@@ -40,12 +40,7 @@ pub struct FitConfig {
 
 impl FitConfig {
     pub fn new(method: Method, hit_plane_x: f64) -> Self {
-        FitConfig {
-            method,
-            start_filter: StartFilter::default(),
-            refine: RefineConfig::default(),
-            hit_plane_x,
-        }
+        FitConfig { method, start_filter: StartFilter::default(), refine: RefineConfig::default(), hit_plane_x }
     }
 
     /// The same settings for a tracker with per-axis noise `sigma` (m).
@@ -109,10 +104,7 @@ fn validate(samples: &[Sample]) -> Result<(), FitError> {
         }
     }
     if samples.len() < MIN_SAMPLES {
-        return Err(FitError::TooFewSamples {
-            n: samples.len(),
-            min: MIN_SAMPLES,
-        });
+        return Err(FitError::TooFewSamples { n: samples.len(), min: MIN_SAMPLES });
     }
     Ok(())
 }
@@ -131,16 +123,10 @@ pub fn find_bounce(samples: &[Sample], radius: f64) -> Option<usize> {
 }
 
 /// Fits one flight; `samples` in time order on any clock.
-pub fn fit_trajectory(
-    samples: &[Sample],
-    prop: &Propagator,
-    cfg: &FitConfig,
-) -> Result<TrajectoryFit, FitError> {
+pub fn fit_trajectory(samples: &[Sample], prop: &Propagator, cfg: &FitConfig) -> Result<TrajectoryFit, FitError> {
     validate(samples)?;
     let mut rejected: Vec<usize> = cfg.start_filter.outliers(samples).iter().copied().collect();
-    let inliers: Vec<usize> = (0..samples.len())
-        .filter(|i| !rejected.contains(i))
-        .collect();
+    let inliers: Vec<usize> = (0..samples.len()).filter(|i| !rejected.contains(i)).collect();
     let clean: Vec<Sample> = inliers.iter().map(|&i| samples[i]).collect();
     let bounce_at = find_bounce(&clean, prop.flight.radius());
     let (pre, post) = match bounce_at {
@@ -148,32 +134,21 @@ pub fn fit_trajectory(
         None => (&clean[..], &clean[..0]),
     };
     if pre.len() < MIN_SAMPLES {
-        return Err(FitError::TooFewSamples {
-            n: pre.len(),
-            min: MIN_SAMPLES,
-        });
+        return Err(FitError::TooFewSamples { n: pre.len(), min: MIN_SAMPLES });
     }
 
     // The paper's fit on the pre-bounce window.
     let cubic = Cubic::fit(pre.iter()).ok_or(FitError::Degenerate)?;
-    let solve =
-        magnus::solve(&cubic, pre.iter().map(|s| s.t), &prop.flight).ok_or(FitError::Degenerate)?;
-    let spin_paper = prop
-        .flight
-        .spin_from_linear(&solve.spin_linear, solve.mean_speed)
-        .unwrap_or(solve.spin_linear);
+    let solve = magnus::solve(&cubic, pre.iter().map(|s| s.t), &prop.flight).ok_or(FitError::Degenerate)?;
+    let spin_paper = prop.flight.spin_from_linear(&solve.spin_linear, solve.mean_speed).unwrap_or(solve.spin_linear);
 
     let mut fit_rejects: Vec<usize> = Vec::new();
     let (t_pre_end, state_pre_end, spin_std, weak_axis, mut rms) = match cfg.method {
         Method::Paper => {
             let t = pre[pre.len() - 1].t;
             let s = BallState::new(cubic.pos(t), cubic.vel(t), spin_paper);
-            let rms = (pre
-                .iter()
-                .map(|p| (cubic.pos(p.t) - p.pos).norm_squared())
-                .sum::<f64>()
-                / pre.len() as f64)
-                .sqrt();
+            let rms =
+                (pre.iter().map(|p| (cubic.pos(p.t) - p.pos).norm_squared()).sum::<f64>() / pre.len() as f64).sqrt();
             (t, s, None, None, rms)
         }
         Method::Refined => {
@@ -184,13 +159,7 @@ pub fn fit_trajectory(
             let mut s = r.state;
             let mut t_now = r.t0;
             advance_flight(prop, &mut s, &mut t_now, t);
-            (
-                t,
-                s,
-                Some(r.spin_std),
-                Some((r.weak_axis, r.weak_axis_std)),
-                r.rms,
-            )
+            (t, s, Some(r.spin_std), Some((r.weak_axis, r.weak_axis_std)), r.rms)
         }
     };
     let spin = state_pre_end.spin;
@@ -203,25 +172,10 @@ pub fn fit_trajectory(
         let post_cubic = Cubic::fit(post.iter()).ok_or(FitError::Degenerate)?;
         let t = post[post.len() - 1].t;
         match cfg.method {
-            Method::Paper => (
-                t,
-                BallState::new(post_cubic.pos(t), post_cubic.vel(t), spin_after),
-            ),
+            Method::Paper => (t, BallState::new(post_cubic.pos(t), post_cubic.vel(t), spin_after)),
             Method::Refined => {
-                let init = BallState::new(
-                    post_cubic.pos(post[0].t),
-                    post_cubic.vel(post[0].t),
-                    spin_after,
-                );
-                let r = refine(
-                    post,
-                    &init,
-                    prop,
-                    &RefineConfig {
-                        fix_spin: true,
-                        ..cfg.refine
-                    },
-                );
+                let init = BallState::new(post_cubic.pos(post[0].t), post_cubic.vel(post[0].t), spin_after);
+                let r = refine(post, &init, prop, &RefineConfig { fix_spin: true, ..cfg.refine });
                 let offset = pre.len() + 1;
                 fit_rejects.extend(r.outliers.iter().map(|i| i + offset));
                 rms = rms.max(r.rms);
@@ -238,11 +192,7 @@ pub fn fit_trajectory(
     // Map rejects in `clean` back to rows of `samples`.
     rejected.extend(fit_rejects.iter().map(|&i| inliers[i]));
     rejected.sort_unstable();
-    let used_post = if post.len() >= MIN_POST_BOUNCE {
-        post.len() + 1
-    } else {
-        0
-    };
+    let used_post = if post.len() >= MIN_POST_BOUNCE { post.len() + 1 } else { 0 };
     let samples_used = pre.len() + used_post - fit_rejects.len();
     let prediction = predict(prop, &state_last, t_last, cfg.hit_plane_x);
     Ok(TrajectoryFit {
@@ -287,20 +237,10 @@ mod tests {
         let dt = 1.0 / 150.0;
         let stop = crate::physics::StopAt::time(0.0);
         loop {
-            out.push(Sample::new(
-                t,
-                s.pos + Vec3::new(n.sample(&mut rng), n.sample(&mut rng), n.sample(&mut rng)),
-            ));
+            out.push(Sample::new(t, s.pos + Vec3::new(n.sample(&mut rng), n.sample(&mut rng), n.sample(&mut rng))));
             let target = t + dt;
             loop {
-                match prop.advance(
-                    &mut s,
-                    &mut t,
-                    &crate::physics::StopAt {
-                        t_max: target,
-                        ..stop
-                    },
-                ) {
+                match prop.advance(&mut s, &mut t, &crate::physics::StopAt { t_max: target, ..stop }) {
                     Event::TimeLimit { .. } => break,
                     Event::Bounce { .. } => continue,
                     _ => return (out, prop, cal.strike.hit_plane_x),
@@ -317,40 +257,20 @@ mod tests {
         // Spin imparted perpendicular to the exit velocity (7, -0.2, 0.9), as by a launcher.
         let spin = Vec3::new(137.0 / 7.0, 280.0, -90.0);
         let (mut samples, prop, x_hit) = observed_flight(7, 0.001, spin);
-        let clean = fit_trajectory(
-            &samples,
-            &prop,
-            &FitConfig::new(Method::Refined, x_hit).with_noise(0.001),
-        )
-        .unwrap();
+        let clean = fit_trajectory(&samples, &prop, &FitConfig::new(Method::Refined, x_hit).with_noise(0.001)).unwrap();
         assert!(clean.observed_bounce.is_some());
         let err = (clean.spin - spin).norm() / spin.norm();
         assert!(err < 0.03, "spin {:?}: {err}", clean.spin);
-        let paper = fit_trajectory(
-            &samples,
-            &prop,
-            &FitConfig::new(Method::Paper, x_hit).with_noise(0.001),
-        )
-        .unwrap();
+        let paper = fit_trajectory(&samples, &prop, &FitConfig::new(Method::Paper, x_hit).with_noise(0.001)).unwrap();
         let err_paper = (paper.spin - spin).norm() / spin.norm();
         assert!(err_paper > err, "paper {err_paper} refined {err}");
 
         samples[0].pos += Vec3::new(0.08, 0.05, -0.04);
         samples[1].pos += Vec3::new(0.06, -0.09, 0.02);
-        let dirty = fit_trajectory(
-            &samples,
-            &prop,
-            &FitConfig::new(Method::Refined, x_hit).with_noise(0.001),
-        )
-        .unwrap();
+        let dirty = fit_trajectory(&samples, &prop, &FitConfig::new(Method::Refined, x_hit).with_noise(0.001)).unwrap();
         assert_eq!(dirty.outliers, vec![0, 1]);
         let err_dirty = (dirty.spin - spin).norm() / spin.norm();
-        assert!(
-            err_dirty < 0.03,
-            "dirty {err_dirty} clean {err} spin {:?} vs {:?}",
-            dirty.spin,
-            clean.spin
-        );
+        assert!(err_dirty < 0.03, "dirty {err_dirty} clean {err} spin {:?} vs {:?}", dirty.spin, clean.spin);
         assert!(dirty.prediction.hit.is_some());
     }
 
@@ -358,27 +278,17 @@ mod tests {
     fn bad_input_is_a_typed_error() {
         let prop = Calibration::default_cell().propagator();
         let cfg = FitConfig::new(Method::Refined, 1.6);
-        let s: Vec<Sample> = (0..10)
-            .map(|i| Sample::new(i as f64 * 0.01, Vec3::new(i as f64 * 0.05, 0.0, 0.3)))
-            .collect();
+        let s: Vec<Sample> =
+            (0..10).map(|i| Sample::new(i as f64 * 0.01, Vec3::new(i as f64 * 0.05, 0.0, 0.3))).collect();
         assert_eq!(
             fit_trajectory(&s[..5], &prop, &cfg).unwrap_err(),
-            FitError::TooFewSamples {
-                n: 5,
-                min: MIN_SAMPLES
-            }
+            FitError::TooFewSamples { n: 5, min: MIN_SAMPLES }
         );
         let mut bad = s.clone();
         bad[4].t = bad[3].t;
-        assert_eq!(
-            fit_trajectory(&bad, &prop, &cfg).unwrap_err(),
-            FitError::NotMonotonic { row: 4 }
-        );
+        assert_eq!(fit_trajectory(&bad, &prop, &cfg).unwrap_err(), FitError::NotMonotonic { row: 4 });
         bad = s.clone();
         bad[2].pos.y = f64::NAN;
-        assert_eq!(
-            fit_trajectory(&bad, &prop, &cfg).unwrap_err(),
-            FitError::NonFinite { row: 2 }
-        );
+        assert_eq!(fit_trajectory(&bad, &prop, &cfg).unwrap_err(), FitError::NonFinite { row: 2 });
     }
 }

@@ -23,11 +23,7 @@ pub const ROLLING_ALPHA: f64 = 0.4;
 
 impl BounceModel {
     pub fn new(restitution: f64, friction: f64, radius: f64) -> Self {
-        BounceModel {
-            restitution,
-            friction,
-            radius,
-        }
+        BounceModel { restitution, friction, radius }
     }
 
     /// The friction ratio α of this impact (2/5 when the ball rolls).
@@ -37,11 +33,7 @@ impl BounceModel {
         let slip_y = vel.y + r * spin.x;
         let slip = slip_x.hypot(slip_y);
         let normal = self.friction * (1.0 + self.restitution) * vel.z.abs();
-        if slip <= normal / ROLLING_ALPHA {
-            ROLLING_ALPHA
-        } else {
-            normal / slip
-        }
+        if slip <= normal / ROLLING_ALPHA { ROLLING_ALPHA } else { normal / slip }
     }
 
     /// Velocity and spin just after an impact with velocity `vel` (v_z < 0)
@@ -49,22 +41,10 @@ impl BounceModel {
     pub fn apply(&self, state: &BallState) -> BallState {
         let (v, w, r, e) = (state.vel, state.spin, self.radius, self.restitution);
         let a = self.alpha(&v, &w);
-        let vel = Vec3::new(
-            (1.0 - a) * v.x + a * r * w.y,
-            (1.0 - a) * v.y - a * r * w.x,
-            -e * v.z,
-        );
+        let vel = Vec3::new((1.0 - a) * v.x + a * r * w.y, (1.0 - a) * v.y - a * r * w.x, -e * v.z);
         let k = 1.5 * a / r;
-        let spin = Vec3::new(
-            -k * v.y + (1.0 - 1.5 * a) * w.x,
-            k * v.x + (1.0 - 1.5 * a) * w.y,
-            w.z,
-        );
-        BallState {
-            pos: state.pos,
-            vel,
-            spin,
-        }
+        let spin = Vec3::new(-k * v.y + (1.0 - 1.5 * a) * w.x, k * v.x + (1.0 - 1.5 * a) * w.y, w.z);
+        BallState { pos: state.pos, vel, spin }
     }
 }
 
@@ -86,11 +66,7 @@ mod tests {
             (-1000.0..1000.0f64, -1000.0..1000.0f64, -1000.0..1000.0f64),
         )
             .prop_map(|((vx, vy, vz), (wx, wy, wz))| {
-                BallState::new(
-                    Vec3::new(0.0, 0.0, R),
-                    Vec3::new(vx, vy, vz),
-                    Vec3::new(wx, wy, wz),
-                )
+                BallState::new(Vec3::new(0.0, 0.0, R), Vec3::new(vx, vy, vz), Vec3::new(wx, wy, wz))
             })
     }
 
@@ -133,16 +109,8 @@ mod tests {
     fn topspin_speeds_the_ball_up_backspin_slows_it() {
         let m = BounceModel::new(0.9, 0.25, R);
         let v = Vec3::new(5.0, 0.0, -3.0);
-        let top = m.apply(&BallState::new(
-            Vec3::zeros(),
-            v,
-            Vec3::new(0.0, 600.0, 0.0),
-        ));
-        let back = m.apply(&BallState::new(
-            Vec3::zeros(),
-            v,
-            Vec3::new(0.0, -600.0, 0.0),
-        ));
+        let top = m.apply(&BallState::new(Vec3::zeros(), v, Vec3::new(0.0, 600.0, 0.0)));
+        let back = m.apply(&BallState::new(Vec3::zeros(), v, Vec3::new(0.0, -600.0, 0.0)));
         assert!(top.vel.x > back.vel.x);
         assert!((top.vel.z - 2.7).abs() < 1e-12);
     }

@@ -79,11 +79,7 @@ impl FlightModel {
             LiftModel::Constant { c_m } => self.lift_scale * c_m,
             LiftModel::Saturating { .. } => {
                 let speed = vel.norm();
-                let s = if speed > 1e-9 {
-                    self.radius * spin.norm() / speed
-                } else {
-                    0.0
-                };
+                let s = if speed > 1e-9 { self.radius * spin.norm() / speed } else { 0.0 };
                 self.lift_scale * self.lift.c_m(s)
             }
         }
@@ -153,10 +149,7 @@ mod tests {
     #[test]
     fn saturating_lift_inverts_the_linear_spin() {
         let mut p = PhysicsParams::paper();
-        p.lift = LiftModel::Saturating {
-            c_m: 0.6,
-            s_half: 0.4,
-        };
+        p.lift = LiftModel::Saturating { c_m: 0.6, s_half: 0.4 };
         let m = p.flight_model();
         let v = Vec3::new(7.0, 0.0, 1.0);
         let w = Vec3::new(10.0, -400.0, 30.0);

@@ -34,11 +34,7 @@ impl BallState {
 
     /// True when every component is finite.
     pub fn is_finite(&self) -> bool {
-        self.pos
-            .iter()
-            .chain(self.vel.iter())
-            .chain(self.spin.iter())
-            .all(|c| c.is_finite())
+        self.pos.iter().chain(self.vel.iter()).chain(self.spin.iter()).all(|c| c.is_finite())
     }
 }
 

@@ -61,43 +61,25 @@ impl PhysicsParams {
             }
         }
         if !(self.drag_coefficient.is_finite() && self.drag_coefficient >= 0.0) {
-            return Err(InvalidParam {
-                key: "drag_coefficient",
-                value: self.drag_coefficient,
-            });
+            return Err(InvalidParam { key: "drag_coefficient", value: self.drag_coefficient });
         }
         match self.lift {
             LiftModel::Constant { c_m } if !(c_m.is_finite() && c_m >= 0.0) => {
-                return Err(InvalidParam {
-                    key: "lift.c_m",
-                    value: c_m,
-                });
+                return Err(InvalidParam { key: "lift.c_m", value: c_m });
             }
             LiftModel::Saturating { c_m, .. } if !(c_m.is_finite() && c_m >= 0.0) => {
-                return Err(InvalidParam {
-                    key: "lift.c_m",
-                    value: c_m,
-                });
+                return Err(InvalidParam { key: "lift.c_m", value: c_m });
             }
             LiftModel::Saturating { s_half, .. } if !(s_half.is_finite() && s_half > 0.0) => {
-                return Err(InvalidParam {
-                    key: "lift.s_half",
-                    value: s_half,
-                });
+                return Err(InvalidParam { key: "lift.s_half", value: s_half });
             }
             _ => {}
         }
         if !(self.restitution.is_finite() && (0.0..=1.0).contains(&self.restitution)) {
-            return Err(InvalidParam {
-                key: "restitution",
-                value: self.restitution,
-            });
+            return Err(InvalidParam { key: "restitution", value: self.restitution });
         }
         if !(self.friction.is_finite() && self.friction >= 0.0) {
-            return Err(InvalidParam {
-                key: "friction",
-                value: self.friction,
-            });
+            return Err(InvalidParam { key: "friction", value: self.friction });
         }
         Ok(())
     }

@@ -26,11 +26,7 @@ pub struct StopAt {
 impl StopAt {
     /// Stop at `t_max` only (and at the floor).
     pub fn time(t_max: f64) -> Self {
-        StopAt {
-            t_max,
-            hit_plane_x: None,
-            net: false,
-        }
+        StopAt { t_max, hit_plane_x: None, net: false }
     }
 }
 
@@ -82,12 +78,7 @@ enum Kind {
 
 impl Propagator {
     pub fn new(flight: FlightModel, bounce: BounceModel, table: Table) -> Self {
-        Propagator {
-            flight,
-            bounce,
-            table,
-            dt: DEFAULT_STEP,
-        }
+        Propagator { flight, bounce, table, dt: DEFAULT_STEP }
     }
 
     /// One RK4 step of length `h` (spin constant in flight).
@@ -144,11 +135,7 @@ impl Propagator {
             if hi - lo < 1e-10 {
                 break;
             }
-            let tau = if g_hi != g_lo {
-                (lo * g_hi - hi * g_lo) / (g_hi - g_lo)
-            } else {
-                0.5 * (lo + hi)
-            };
+            let tau = if g_hi != g_lo { (lo * g_hi - hi * g_lo) / (g_hi - g_lo) } else { 0.5 * (lo + hi) };
             let tau = tau.clamp(lo, hi);
             let s = self.rk4(s0, tau);
             let g = self.g(kind, &s, stop);
@@ -272,11 +259,7 @@ mod tests {
         p.drag_coefficient = 0.0;
         p.lift = crate::physics::LiftModel::Constant { c_m: 0.0 };
         let prop = Propagator::new(p.flight_model(), p.bounce_model(), Table::default());
-        let s = BallState::new(
-            Vec3::new(0.0, 0.0, 1.0),
-            Vec3::new(1.0, 0.0, 2.0),
-            Vec3::zeros(),
-        );
+        let s = BallState::new(Vec3::new(0.0, 0.0, 1.0), Vec3::new(1.0, 0.0, 2.0), Vec3::zeros());
         let e = prop.fly(&s, 0.3);
         assert!((e.pos.z - (1.0 + 0.6 - 0.5 * 9.81 * 0.09)).abs() < 1e-12);
         assert!((e.pos.x - 0.3).abs() < 1e-12);
@@ -284,11 +267,7 @@ mod tests {
 
     #[test]
     fn step_size_does_not_matter() {
-        let s = BallState::new(
-            Vec3::new(-1.5, 0.1, 0.3),
-            Vec3::new(6.0, -0.3, 1.0),
-            Vec3::new(0.0, 400.0, 50.0),
-        );
+        let s = BallState::new(Vec3::new(-1.5, 0.1, 0.3), Vec3::new(6.0, -0.3, 1.0), Vec3::new(0.0, 400.0, 50.0));
         let mut coarse = paper();
         let mut fine = paper();
         coarse.dt = 0.004;
@@ -301,31 +280,13 @@ mod tests {
     #[test]
     fn serve_bounces_then_crosses_the_hitting_plane() {
         let prop = paper();
-        let mut s = BallState::new(
-            Vec3::new(-1.5, 0.0, 0.3),
-            Vec3::new(7.5, 0.0, 1.0),
-            Vec3::new(0.0, 150.0, 0.0),
-        );
+        let mut s = BallState::new(Vec3::new(-1.5, 0.0, 0.3), Vec3::new(7.5, 0.0, 1.0), Vec3::new(0.0, 150.0, 0.0));
         let mut t = 0.0;
-        let stop = StopAt {
-            t_max: 2.0,
-            hit_plane_x: Some(1.6),
-            net: true,
-        };
+        let stop = StopAt { t_max: 2.0, hit_plane_x: Some(1.6), net: true };
         let e = prop.advance(&mut s, &mut t, &stop);
-        let Event::Bounce { before, .. } = e else {
-            panic!("expected bounce, got {e:?}")
-        };
-        assert!(
-            (before.pos.z - 0.02).abs() < 1e-7,
-            "contact at z = {}",
-            before.pos.z
-        );
-        assert!(
-            before.pos.x > 0.0 && before.pos.x < 1.37,
-            "bounce at {:?}",
-            before.pos
-        );
+        let Event::Bounce { before, .. } = e else { panic!("expected bounce, got {e:?}") };
+        assert!((before.pos.z - 0.02).abs() < 1e-7, "contact at z = {}", before.pos.z);
+        assert!(before.pos.x > 0.0 && before.pos.x < 1.37, "bounce at {:?}", before.pos);
         assert!(s.vel.z > 0.0);
         let e = prop.advance(&mut s, &mut t, &stop);
         assert!(matches!(e, Event::HitPlane { .. }), "{e:?}");
@@ -335,21 +296,9 @@ mod tests {
     #[test]
     fn low_ball_hits_the_net() {
         let prop = paper();
-        let mut s = BallState::new(
-            Vec3::new(-1.0, 0.0, 0.15),
-            Vec3::new(8.0, 0.0, -0.2),
-            Vec3::zeros(),
-        );
+        let mut s = BallState::new(Vec3::new(-1.0, 0.0, 0.15), Vec3::new(8.0, 0.0, -0.2), Vec3::zeros());
         let mut t = 0.0;
-        let e = prop.advance(
-            &mut s,
-            &mut t,
-            &StopAt {
-                t_max: 1.0,
-                hit_plane_x: None,
-                net: true,
-            },
-        );
+        let e = prop.advance(&mut s, &mut t, &StopAt { t_max: 1.0, hit_plane_x: None, net: true });
         assert!(matches!(e, Event::Net { .. }), "{e:?}");
     }
 

@@ -21,12 +21,7 @@ pub struct Table {
 
 impl Default for Table {
     fn default() -> Self {
-        Table {
-            length: 2.74,
-            width: 1.525,
-            net_height: 0.1525,
-            net_length: 1.83,
-        }
+        Table { length: 2.74, width: 1.525, net_height: 0.1525, net_length: 1.83 }
     }
 }
 
@@ -49,9 +44,6 @@ impl Table {
     /// True when a ball of radius `r` centred at `p` touches the net (a thin
     /// vertical sheet at x = 0).
     pub fn touches_net(&self, p: &Vec3, r: f64) -> bool {
-        p.x.abs() <= r
-            && p.z <= self.net_height + r
-            && p.z >= -r
-            && p.y.abs() <= self.net_length / 2.0 + r
+        p.x.abs() <= r && p.z <= self.net_height + r && p.z >= -r && p.y.abs() <= self.net_length / 2.0 + r
     }
 }
