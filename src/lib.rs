@@ -17,6 +17,7 @@
 //! - [`cli`]: the `topspin` command line.
 
 pub mod calib;
+pub mod estimator;
 pub mod cli;
 pub mod fit;
 pub mod physics;

@@ -37,6 +37,26 @@ pub struct TableFile {
 pub struct StrikeCalib {
     /// The hitting plane x = hit_plane_x in the table frame, m.
     pub hit_plane_x: f64,
+    /// Hitting window on the plane: allowed y range, m (table frame).
+    pub window_y: [f64; 2],
+    /// Allowed z range of the hitting point, m (table frame).
+    pub window_z: [f64; 2],
+    /// The least time between a plan and its hit the robot can use, s.
+    pub min_lead_time: f64,
+    /// Bat speed towards the opponent at the hit, m/s.
+    pub bat_speed: f64,
+    /// ω_ref: the spin ω_y at which β reaches its topspin/backspin angle, rad/s.
+    pub spin_ref: f64,
+    /// β (rotation about y) for ω_y ≥ +ω_ref, degrees.
+    pub beta_topspin_deg: f64,
+    /// β for ω_y ≤ −ω_ref, degrees.
+    pub beta_backspin_deg: f64,
+    /// A (rotation about z) = a0 + a_per_y · y, degrees and degrees per m.
+    pub a0_deg: f64,
+    pub a_per_y_deg: f64,
+    /// C (rotation about x) = c0 + c_per_y · y, degrees and degrees per m.
+    pub c0_deg: f64,
+    pub c_per_y_deg: f64,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -124,8 +144,26 @@ impl Calibration {
 
         let (text, path) = read_or_default(dir, "strike.toml", DEFAULT_STRIKE)?;
         let strike = parse::<StrikeFile>(&text, &path)?.strike;
-        if !(strike.hit_plane_x.is_finite() && strike.hit_plane_x > 0.0) {
-            return Err(CalibError::OutOfRange { path, key: "strike.hit_plane_x", value: strike.hit_plane_x });
+        let s = &strike;
+        let ordered = |r: [f64; 2]| r[0].is_finite() && r[1].is_finite() && r[0] < r[1];
+        let checks = [
+            ("strike.hit_plane_x", s.hit_plane_x, s.hit_plane_x.is_finite() && s.hit_plane_x > 0.0),
+            ("strike.window_y", s.window_y[0], ordered(s.window_y)),
+            ("strike.window_z", s.window_z[0], ordered(s.window_z)),
+            ("strike.min_lead_time", s.min_lead_time, s.min_lead_time.is_finite() && s.min_lead_time >= 0.0),
+            ("strike.bat_speed", s.bat_speed, s.bat_speed.is_finite() && (0.0..=5.0).contains(&s.bat_speed)),
+            ("strike.spin_ref", s.spin_ref, s.spin_ref.is_finite() && s.spin_ref > 0.0),
+            ("strike.beta_topspin_deg", s.beta_topspin_deg, s.beta_topspin_deg.abs() <= 90.0),
+            ("strike.beta_backspin_deg", s.beta_backspin_deg, s.beta_backspin_deg.abs() <= 90.0),
+            ("strike.a0_deg", s.a0_deg, s.a0_deg.abs() <= 180.0),
+            ("strike.a_per_y_deg", s.a_per_y_deg, s.a_per_y_deg.abs() <= 180.0),
+            ("strike.c0_deg", s.c0_deg, s.c0_deg.abs() <= 180.0),
+            ("strike.c_per_y_deg", s.c_per_y_deg, s.c_per_y_deg.abs() <= 180.0),
+        ];
+        for (key, value, ok) in checks {
+            if !ok {
+                return Err(CalibError::OutOfRange { path, key, value });
+            }
         }
         Ok(Calibration { physics, table, strike })
     }
@@ -156,10 +194,10 @@ mod tests {
     fn a_bad_value_is_named() {
         let dir = std::env::temp_dir().join(format!("topspin-calib-test-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
-        std::fs::write(dir.join("strike.toml"), "version = 1\n[strike]\nhit_plane_x = -3.0\n").unwrap();
+        std::fs::write(dir.join("strike.toml"), DEFAULT_STRIKE.replace("hit_plane_x = 1.60", "hit_plane_x = -3.0")).unwrap();
         let e = Calibration::load(Some(&dir)).unwrap_err().to_string();
         assert!(e.contains("strike.hit_plane_x"), "{e}");
-        std::fs::write(dir.join("strike.toml"), "version = 1\n[strike]\nhit_plane = 1.6\n").unwrap();
+        std::fs::write(dir.join("strike.toml"), DEFAULT_STRIKE.replace("hit_plane_x = 1.60", "hit_plane = 1.6")).unwrap();
         let e = Calibration::load(Some(&dir)).unwrap_err().to_string();
         assert!(e.contains("hit_plane"), "{e}");
         std::fs::remove_dir_all(&dir).unwrap();

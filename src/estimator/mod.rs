@@ -1,0 +1,379 @@
+//! The streaming estimator the estimator thread owns (DESIGN §4, §6): one
+//! observation at a time in, trajectory events and at most one strike plan
+//! out. A plain struct with time passed in; no I/O, no allocation after
+//! construction (fixed-capacity windows, named capacities), bounded work
+//! per observation.
+//!
+//! Life cycle of a ball: observations after a gap open a *candidate*; once
+//! [`ACQUIRE_LEN`] of them are in, the paper's start filter removes false
+//! detections and a cubic fit gives the first state — if the ball moves
+//! towards the robot it becomes a *track* (EKF), otherwise it is dropped.
+//! A track ends when the ball goes silent, bounces a second time, passes
+//! the robot, is returned, stops, or leaves the volume, or when the gate
+//! rejects [`MAX_CONSECUTIVE_REJECTS`] observations in a row (another ball,
+//! or a real change of course): those observations then open a new
+//! candidate.
+
+pub mod ekf;
+pub mod stroke;
+
+use heapless::Vec as HVec;
+
+use crate::calib::Calibration;
+use crate::fit::outlier::{START_WINDOW, StartFilter};
+use crate::fit::poly::Cubic;
+use crate::fit::{Prediction, Sample, magnus, predict};
+use crate::physics::{Propagator, Vec3};
+use crate::plan::StrikePlan;
+use crate::time::Instant;
+use ekf::{Ekf, EkfNoise, Update};
+pub use stroke::Withheld;
+
+/// Observations collected before a candidate becomes a track.
+pub const ACQUIRE_LEN: usize = 12;
+/// Capacity of the pre-bounce window the spin is refitted over (≈ 1 s at
+/// 250 Hz: longer than any flight to the bounce).
+pub const WINDOW_CAP: usize = 256;
+/// Rejections in a row after which a track is given up.
+pub const MAX_CONSECUTIVE_REJECTS: usize = 4;
+/// Capacity of the event list of one step.
+pub const EVENTS_CAP: usize = 8;
+
+/// Where the plan's spin comes from.
+#[derive(Copy, Clone, Debug, PartialEq, Eq)]
+pub enum SpinSource {
+    /// The EKF's spin state (default: measured better, see `topspin eval stream`).
+    Ekf,
+    /// The paper's fit over the pre-bounce window, imposed on the EKF as a
+    /// parameter after every refit.
+    WindowFit,
+}
+
+/// Settings of the estimator.
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub struct EstimatorConfig {
+    /// Silence after which a track ends, s.
+    pub silence: f64,
+    /// The smallest speed towards the robot that makes a candidate a track, m/s.
+    pub min_approach_speed: f64,
+    pub spin_source: SpinSource,
+    pub noise: EkfNoise,
+    pub start_filter: StartFilter,
+    /// Initial spin uncertainty of a new track, rad/s.
+    pub initial_spin_std: f64,
+}
+
+impl Default for EstimatorConfig {
+    fn default() -> Self {
+        EstimatorConfig {
+            silence: 0.1,
+            min_approach_speed: 1.0,
+            spin_source: SpinSource::Ekf,
+            noise: EkfNoise::default(),
+            start_filter: StartFilter::default(),
+            initial_spin_std: 250.0,
+        }
+    }
+}
+
+impl EstimatorConfig {
+    /// Tuned for a tracker with per-axis noise `sigma` (m).
+    pub fn with_noise(mut self, sigma: f64) -> Self {
+        self.noise.measurement = sigma;
+        self.start_filter.noise = sigma;
+        self
+    }
+}
+
+/// Why a track ended.
+#[derive(Copy, Clone, Debug, PartialEq, Eq)]
+pub enum EndReason {
+    Silence,
+    SecondBounce,
+    PassedRobot,
+    Returned,
+    Stopped,
+    LeftVolume,
+    /// The gate rejected the ball's observations repeatedly.
+    Lost,
+}
+
+/// Something the telemetry may log.
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub enum EstimatorEvent {
+    Started { trajectory: u32, t: f64, start_outliers: u8 },
+    Ended { trajectory: u32, t: f64, reason: EndReason },
+    /// A candidate that did not move towards the robot.
+    Discarded { t: f64 },
+    Rejected { trajectory: u32, t: f64, d2: f64 },
+    Bounce { trajectory: u32, t: f64 },
+    Withheld { trajectory: u32, t: f64, reason: Withheld },
+}
+
+/// What one observation produced.
+#[derive(Clone, Debug, Default)]
+pub struct StepOutput {
+    pub events: HVec<EstimatorEvent, EVENTS_CAP>,
+    /// A new plan to publish.
+    pub plan: Option<StrikePlan>,
+}
+
+impl StepOutput {
+    fn push(&mut self, e: EstimatorEvent) {
+        // A full list drops the rest; EVENTS_CAP exceeds the most one step emits.
+        let _ = self.events.push(e);
+    }
+}
+
+#[derive(Clone, Debug)]
+struct Track {
+    id: u32,
+    ekf: Ekf,
+    last_t: f64,
+    rejects: HVec<Sample, MAX_CONSECUTIVE_REJECTS>,
+    window: HVec<Sample, WINDOW_CAP>,
+    bounced: bool,
+}
+
+/// The estimator: at most one ball tracked at a time (the one coming at
+/// the robot).
+#[derive(Debug)]
+pub struct Estimator {
+    cfg: EstimatorConfig,
+    prop: Propagator,
+    strike: crate::calib::StrikeCalib,
+    candidate: HVec<Sample, START_WINDOW>,
+    track: Option<Track>,
+    next_id: u32,
+    plan_seq: u32,
+    last_prediction: Option<Prediction>,
+}
+
+impl Estimator {
+    pub fn new(cal: &Calibration, cfg: EstimatorConfig) -> Self {
+        Estimator {
+            cfg,
+            prop: cal.propagator(),
+            strike: cal.strike.clone(),
+            candidate: HVec::new(),
+            track: None,
+            next_id: 1,
+            plan_seq: 0,
+            last_prediction: None,
+        }
+    }
+
+    /// The current track's id and EKF, if tracking.
+    pub fn tracking(&self) -> Option<(u32, &Ekf)> {
+        self.track.as_ref().map(|t| (t.id, &t.ekf))
+    }
+
+    /// The prediction behind the latest plan or withheld plan.
+    pub fn last_prediction(&self) -> Option<&Prediction> {
+        self.last_prediction.as_ref()
+    }
+
+    /// Ends a silent track; call when no observation has come for a while.
+    pub fn poll(&mut self, now: Instant, out: &mut StepOutput) {
+        let t = now.as_secs_f64();
+        if let Some(track) = &self.track
+            && t - track.last_t > self.cfg.silence
+        {
+            out.push(EstimatorEvent::Ended { trajectory: track.id, t, reason: EndReason::Silence });
+            self.track = None;
+        }
+        if let Some(last) = self.candidate.last()
+            && t - last.t > self.cfg.silence
+        {
+            self.candidate.clear();
+        }
+    }
+
+    /// Takes one observation (capture time on our clock, position in the
+    /// table frame; the caller has validated it).
+    pub fn observe(&mut self, capture: Instant, pos: Vec3) -> StepOutput {
+        let mut out = StepOutput::default();
+        let t = capture.as_secs_f64();
+        self.poll(capture, &mut out);
+        let sample = Sample::new(t, pos);
+        if self.track.is_some() {
+            self.track_step(sample, &mut out);
+        } else {
+            self.acquire(sample, &mut out);
+        }
+        out
+    }
+
+    fn acquire(&mut self, sample: Sample, out: &mut StepOutput) {
+        if let Some(last) = self.candidate.last()
+            && sample.t <= last.t
+        {
+            return; // out of order or duplicate
+        }
+        let _ = self.candidate.push(sample);
+        if self.candidate.len() < ACQUIRE_LEN {
+            return;
+        }
+        let outliers = self.cfg.start_filter.outliers(&self.candidate);
+        let mut inliers: HVec<Sample, START_WINDOW> = HVec::new();
+        for (i, s) in self.candidate.iter().enumerate() {
+            if !outliers.contains(&i) {
+                let _ = inliers.push(*s);
+            }
+        }
+        self.candidate.clear();
+        let Some(cubic) = Cubic::fit(inliers.iter()) else { return };
+        let last = inliers[inliers.len() - 1];
+        let vel = cubic.vel(last.t);
+        if vel.x < self.cfg.min_approach_speed {
+            out.push(EstimatorEvent::Discarded { t: last.t });
+            return;
+        }
+        let spin = magnus::solve(&cubic, inliers.iter().map(|s| s.t), &self.prop.flight)
+            .map(|m| m.spin_linear)
+            .filter(|w| w.norm() < 1500.0)
+            .unwrap_or_else(Vec3::zeros);
+        let state = crate::physics::BallState::new(cubic.pos(last.t), vel, spin);
+        let sigma = self.cfg.noise.measurement;
+        let ekf = Ekf::new(last.t, &state, 2.0 * sigma, 0.3, self.cfg.initial_spin_std, self.cfg.noise);
+        let id = self.next_id;
+        self.next_id = self.next_id.wrapping_add(1);
+        let mut window = HVec::new();
+        for s in &inliers {
+            let _ = window.push(*s);
+        }
+        self.track = Some(Track { id, ekf, last_t: last.t, rejects: HVec::new(), window, bounced: false });
+        out.push(EstimatorEvent::Started { trajectory: id, t: last.t, start_outliers: outliers.len() as u8 });
+        self.plan(last.t, out);
+    }
+
+    fn track_step(&mut self, sample: Sample, out: &mut StepOutput) {
+        let cfg = self.cfg;
+        let track = self.track.as_mut().expect("tracking");
+        if sample.t <= track.ekf.t {
+            return; // out of order or duplicate
+        }
+        let mut trial = track.ekf;
+        if let Some(tb) = trial.predict(&self.prop, sample.t) {
+            // Only a tentative bounce until the observation is accepted.
+            if let Update::Accepted { .. } = trial.update(&sample.pos) {
+                out.push(EstimatorEvent::Bounce { trajectory: track.id, t: tb });
+                track.bounced = true;
+            }
+            trial = track.ekf;
+            trial.predict(&self.prop, sample.t);
+        }
+        match trial.update(&sample.pos) {
+            Update::Accepted { .. } => {
+                track.ekf = trial;
+                track.last_t = sample.t;
+                track.rejects.clear();
+                if !track.bounced {
+                    let _ = track.window.push(sample);
+                    if cfg.spin_source == SpinSource::WindowFit {
+                        refit_spin(track, &self.prop);
+                    }
+                }
+            }
+            Update::Rejected { d2 } => {
+                out.push(EstimatorEvent::Rejected { trajectory: track.id, t: sample.t, d2 });
+                if track.rejects.push(sample).is_err() || track.rejects.is_full() {
+                    let id = track.id;
+                    let rejected = track.rejects.clone();
+                    self.track = None;
+                    out.push(EstimatorEvent::Ended { trajectory: id, t: sample.t, reason: EndReason::Lost });
+                    self.candidate.clear();
+                    for s in &rejected {
+                        let _ = self.candidate.push(*s);
+                    }
+                }
+                return;
+            }
+        }
+        if let Some(reason) = self.ended(sample.t) {
+            let id = self.track.as_ref().map_or(0, |t| t.id);
+            out.push(EstimatorEvent::Ended { trajectory: id, t: sample.t, reason });
+            self.track = None;
+            return;
+        }
+        self.plan(sample.t, out);
+    }
+
+    fn ended(&self, _t: f64) -> Option<EndReason> {
+        let track = self.track.as_ref()?;
+        let s = track.ekf.state();
+        if track.ekf.bounces >= 2 {
+            Some(EndReason::SecondBounce)
+        } else if s.pos.x > self.strike.hit_plane_x + 0.3 {
+            Some(EndReason::PassedRobot)
+        } else if s.vel.x < -0.5 {
+            Some(EndReason::Returned)
+        } else if s.vel.norm() < 0.3 {
+            Some(EndReason::Stopped)
+        } else if s.pos.z < -0.3 || s.pos.y.abs() > 2.5 || s.pos.x < -3.0 {
+            Some(EndReason::LeftVolume)
+        } else {
+            None
+        }
+    }
+
+    fn plan(&mut self, t: f64, out: &mut StepOutput) {
+        let Some(track) = &self.track else { return };
+        let state = track.ekf.state();
+        let prediction = predict(&self.prop, &state, t, self.strike.hit_plane_x);
+        self.last_prediction = Some(prediction);
+        let Some(hit) = prediction.hit else {
+            out.push(EstimatorEvent::Withheld { trajectory: track.id, t, reason: Withheld::NoHit });
+            return;
+        };
+        if let Err(reason) = stroke::check(&self.strike, &hit, hit.t - t) {
+            out.push(EstimatorEvent::Withheld { trajectory: track.id, t, reason });
+            return;
+        }
+        // The spin the ball arrives with decides the stroke.
+        let spin = hit.state.spin;
+        self.plan_seq = self.plan_seq.wrapping_add(1);
+        let tau = hit.t - t;
+        let p = &track.ekf.p;
+        let k_m = self.prop.flight.k_m0() * state.vel.norm();
+        let var = p.fixed_view::<3, 3>(0, 0).trace()
+            + tau * tau * p.fixed_view::<3, 3>(3, 3).trace()
+            + (0.5 * tau * tau * k_m).powi(2) * p.fixed_view::<3, 3>(6, 6).trace();
+        let confidence = 1.0 / (1.0 + var / (0.02 * 0.02));
+        out.plan = Some(StrikePlan {
+            seq: self.plan_seq,
+            trajectory: track.id,
+            made_at: Instant::from_secs_f64(t),
+            hit_time: Instant::from_secs_f64(hit.t),
+            position: hit.state.pos,
+            velocity: stroke::bat_velocity(&self.strike),
+            orientation: stroke::bat_orientation(&self.strike, &spin, hit.state.pos.y),
+            spin: state.spin,
+            confidence,
+        });
+    }
+}
+
+/// The paper's fit over the pre-bounce window, imposed on the EKF's spin.
+fn refit_spin(track: &mut Track, prop: &Propagator) {
+    if track.window.len() < ACQUIRE_LEN {
+        return;
+    }
+    let Some(cubic) = Cubic::fit(track.window.iter()) else { return };
+    let Some(m) = magnus::solve(&cubic, track.window.iter().map(|s| s.t), &prop.flight) else { return };
+    let spin = prop.flight.spin_from_linear(&m.spin_linear, m.mean_speed).unwrap_or(m.spin_linear);
+    for k in 0..3 {
+        track.ekf.x[6 + k] = spin[k];
+    }
+    for i in 0..9 {
+        for j in 6..9 {
+            if i != j {
+                track.ekf.p[(i, j)] = 0.0;
+                track.ekf.p[(j, i)] = 0.0;
+            }
+        }
+    }
+    for j in 6..9 {
+        track.ekf.p[(j, j)] = 25.0 * 25.0;
+    }
+}
