@@ -177,7 +177,9 @@ impl fmt::Display for Setting {
 
 /// A setting name that is not one of the nine.
 #[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
-#[error("unknown launcher setting `{0}` (expected e.g. backspin-low, sidespin-medium, topspin-high)")]
+#[error(
+    "unknown launcher setting `{0}` (expected e.g. backspin-low, sidespin-medium, topspin-high)"
+)]
 pub struct UnknownSetting(pub String);
 
 impl FromStr for Setting {
@@ -214,7 +216,9 @@ pub struct Launch {
 /// No draw of a setting gave a ball that bounces on the robot's half and
 /// reaches the hitting plane (possible only with odd physics or geometry).
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
-#[error("launcher setting {setting} found no valid shot in {attempts} draws (check physics, table and hit_plane_x)")]
+#[error(
+    "launcher setting {setting} found no valid shot in {attempts} draws (check physics, table and hit_plane_x)"
+)]
 pub struct NoValidShot {
     pub setting: Setting,
     pub attempts: usize,
@@ -273,11 +277,14 @@ impl Draw {
         let axis = match spin_type {
             SpinType::Topspin => across,
             SpinType::Backspin => -across,
-            SpinType::Sidespin => up * (self.side_sign * self.tilt.cos()) - across * self.tilt.sin(),
+            SpinType::Sidespin => {
+                up * (self.side_sign * self.tilt.cos()) - across * self.tilt.sin()
+            }
         };
         // Roll about the exit velocity keeps the axis ⟂ to it.
-        let axis = nalgebra::Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(dir), self.roll)
-            * axis;
+        let axis =
+            nalgebra::Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(dir), self.roll)
+                * axis;
         BallState::new(self.origin, dir * self.speed, axis * self.spin)
     }
 }
@@ -307,9 +314,8 @@ fn aim(draw: &Draw, spin_type: SpinType, prop: &Propagator) -> Option<(f64, f64)
     for _ in 0..12 {
         // Range: landing x (along the aim) grows with the elevation.
         let range = |el: f64| -> Option<f64> {
-            landing(prop, &draw.state(spin_type, el, az)).map(|(x, y)| {
-                (x - o.x) * az.cos() + (y - o.y) * az.sin()
-            })
+            landing(prop, &draw.state(spin_type, el, az))
+                .map(|(x, y)| (x - o.x) * az.cos() + (y - o.y) * az.sin())
         };
         let want = (tx - o.x) * az.cos() + (ty - o.y) * az.sin();
         let (mut lo, mut hi) = ELEVATION;
@@ -441,8 +447,20 @@ mod tests {
     #[test]
     fn same_seed_same_ball() {
         let prop = Calibration::default_cell().propagator();
-        let a = launch(Setting::ALL[8], &prop, 1.6, &mut ChaCha8Rng::seed_from_u64(3)).unwrap();
-        let b = launch(Setting::ALL[8], &prop, 1.6, &mut ChaCha8Rng::seed_from_u64(3)).unwrap();
+        let a = launch(
+            Setting::ALL[8],
+            &prop,
+            1.6,
+            &mut ChaCha8Rng::seed_from_u64(3),
+        )
+        .unwrap();
+        let b = launch(
+            Setting::ALL[8],
+            &prop,
+            1.6,
+            &mut ChaCha8Rng::seed_from_u64(3),
+        )
+        .unwrap();
         assert_eq!(a, b);
     }
 }

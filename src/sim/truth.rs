@@ -99,11 +99,15 @@ impl Truth {
             .then(|| {
                 let (mut s, mut t) = (s0, 0.0);
                 loop {
-                    match prop.advance(&mut s, &mut t, &StopAt {
-                        t_max: FLIGHT_T_MAX,
-                        hit_plane_x: Some(0.0),
-                        net: false,
-                    }) {
+                    match prop.advance(
+                        &mut s,
+                        &mut t,
+                        &StopAt {
+                            t_max: FLIGHT_T_MAX,
+                            hit_plane_x: Some(0.0),
+                            net: false,
+                        },
+                    ) {
                         Event::HitPlane { t } => break Some(t),
                         Event::Bounce { .. } => continue,
                         _ => break None,

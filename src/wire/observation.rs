@@ -391,14 +391,16 @@ mod tests {
             any::<u16>(),
             any::<bool>(),
         )
-            .prop_map(|(seq, ns, (x, y, z), residual, cameras, valid)| Observation {
-                seq,
-                capture: Instant::from_nanos(ns),
-                pos: [x, y, z],
-                residual,
-                cameras,
-                valid,
-            })
+            .prop_map(
+                |(seq, ns, (x, y, z), residual, cameras, valid)| Observation {
+                    seq,
+                    capture: Instant::from_nanos(ns),
+                    pos: [x, y, z],
+                    residual,
+                    cameras,
+                    valid,
+                },
+            )
     }
 
     proptest! {
