@@ -36,6 +36,16 @@ pub struct SimArgs {
     /// Local address for the stream's socket.
     #[arg(long, value_name = "ADDR", default_value = "0.0.0.0:0")]
     pub bind: String,
+    /// What to simulate (boxed: the options are large next to other
+    /// subcommands' arguments).
+    #[command(flatten)]
+    pub opts: Box<SimOptions>,
+}
+
+/// The simulation options shared by the file and the stream output (and
+/// reusable by other commands that run the simulated tracker).
+#[derive(Debug, clap::Args)]
+pub struct SimOptions {
     /// Number of balls.
     #[arg(long, default_value_t = 20)]
     pub balls: usize,
@@ -93,7 +103,7 @@ struct Plan {
     tracker: TrackerModel,
 }
 
-fn plan(a: &SimArgs) -> anyhow::Result<Plan> {
+fn plan(a: &SimOptions) -> anyhow::Result<Plan> {
     let settings = parse_settings(&a.setting)?;
     if !(a.noise_mm.is_finite() && a.noise_mm >= 0.0) {
         return Err(bad(format!("--noise-mm {} must be ≥ 0", a.noise_mm)));
@@ -155,8 +165,9 @@ struct TrackerFile {
     false_starts: usize,
 }
 
-pub fn run(a: SimArgs) -> anyhow::Result<()> {
-    let p = plan(&a)?;
+pub fn run(args: SimArgs) -> anyhow::Result<()> {
+    let a = &*args.opts;
+    let p = plan(a)?;
     let prop = p.cal.propagator();
     let x_hit = p.cal.strike.hit_plane_x;
     let mut balls = Vec::with_capacity(a.balls);
@@ -169,14 +180,14 @@ pub fn run(a: SimArgs) -> anyhow::Result<()> {
     let ends: Vec<f64> = balls.iter().map(|b| b.truth.end_t).collect();
     let starts = sim::schedule(&ends, a.gap);
 
-    if let Some(dir) = &a.out {
-        write_files(dir, &a, &p, &balls, &starts)?;
+    if let Some(dir) = &args.out {
+        write_files(dir, a, &p, &balls, &starts)?;
     }
     for b in &balls {
         println!("{}", summary(b));
     }
-    if let Some(to) = &a.to {
-        stream(to, &a.bind, &p.tracker, &balls, &starts)?;
+    if let Some(to) = &args.to {
+        stream(to, &args.bind, &p.tracker, &balls, &starts)?;
     }
     Ok(())
 }
@@ -198,7 +209,7 @@ fn summary(b: &SimBall) -> String {
         Some(bn) => {
             let _ = write!(
                 s,
-                " bounce ({:.3}, {:.3}) at {:.3} s",
+                " bounce x,y ({:.3}, {:.3}) at {:.3} s",
                 bn.pos[0], bn.pos[1], bn.t
             );
         }
@@ -206,7 +217,11 @@ fn summary(b: &SimBall) -> String {
     }
     match &t.hit {
         Some(h) => {
-            let _ = write!(s, " hit ({:.3}, {:.3}) at {:.3} s", h.pos[1], h.pos[2], h.t);
+            let _ = write!(
+                s,
+                " hit y,z ({:.3}, {:.3}) at {:.3} s",
+                h.pos[1], h.pos[2], h.t
+            );
         }
         None => s.push_str(" hit -"),
     }
@@ -221,7 +236,7 @@ fn summary(b: &SimBall) -> String {
 
 fn write_files(
     dir: &Path,
-    a: &SimArgs,
+    a: &SimOptions,
     p: &Plan,
     balls: &[SimBall],
     starts: &[f64],

@@ -162,7 +162,7 @@ mod tests {
             let obs = observe(&truth, &prop, &model, 0.0, &mut rng);
             let first = obs[0].t;
             let last = obs.last().unwrap().t;
-            assert!(first >= 0.0 && first < 1.0 / 150.0);
+            assert!((0.0..1.0 / 150.0).contains(&first));
             assert!(last <= truth.end_t && truth.end_t - last < 1.0 / 150.0);
             for w in obs.windows(2) {
                 assert!((w[1].t - w[0].t - 1.0 / 150.0).abs() < 1e-9);
