@@ -1,0 +1,105 @@
+//! The estimator's hot path allocates nothing after warm-up: 10 000
+//! observations of balls back to back (with noise, dropouts, outliers and
+//! silences) through `Estimator::observe`, counted by a global allocator.
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+
+use rand::{Rng, SeedableRng};
+use rand_distr::{Distribution, Normal};
+use topspin::calib::Calibration;
+use topspin::estimator::{Estimator, EstimatorConfig};
+use topspin::physics::{BallState, Event, StopAt, Vec3};
+use topspin::time::Instant;
+
+struct Counting;
+
+static COUNTING: AtomicBool = AtomicBool::new(false);
+static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
+
+// SAFETY: forwards to the system allocator unchanged; only counts.
+#[allow(unsafe_code)]
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        if COUNTING.load(Ordering::Relaxed) {
+            ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+        }
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        unsafe { System.dealloc(ptr, layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        if COUNTING.load(Ordering::Relaxed) {
+            ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+        }
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+/// Observations of `balls` launcher-like balls at 150 Hz, 0.4 s apart.
+fn stream(balls: usize, seed: u64) -> Vec<(f64, Vec3)> {
+    let cal = Calibration::default_cell();
+    let prop = cal.propagator();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let noise = Normal::new(0.0, 0.002).unwrap();
+    let mut out = Vec::new();
+    let mut t0 = 1.0;
+    for _ in 0..balls {
+        let mut s = BallState::new(
+            Vec3::new(-1.5, rng.random_range(-0.3..0.3), 0.3),
+            Vec3::new(rng.random_range(5.0..9.0), rng.random_range(-0.4..0.4), rng.random_range(0.3..1.2)),
+            Vec3::new(0.0, rng.random_range(-400.0..400.0), rng.random_range(-200.0..200.0)),
+        );
+        let mut t = t0;
+        loop {
+            let target = t + 1.0 / 150.0;
+            let mut done = false;
+            loop {
+                match prop.advance(&mut s, &mut t, &StopAt::time(target)) {
+                    Event::TimeLimit { .. } => break,
+                    Event::Bounce { .. } => continue,
+                    _ => {
+                        done = true;
+                        break;
+                    }
+                }
+            }
+            if done || s.pos.x > 2.0 {
+                break;
+            }
+            if rng.random_bool(0.05) {
+                continue; // dropout
+            }
+            let mut p = s.pos + Vec3::new(noise.sample(&mut rng), noise.sample(&mut rng), noise.sample(&mut rng));
+            if rng.random_bool(0.02) {
+                p.y += 0.3; // outlier
+            }
+            out.push((t, p));
+        }
+        t0 = t + 0.4;
+    }
+    out
+}
+
+#[test]
+fn ten_thousand_observations_allocate_nothing() {
+    let obs = stream(200, 3);
+    assert!(obs.len() > 11_000, "{} observations", obs.len());
+    let mut est = Estimator::new(&Calibration::default_cell(), EstimatorConfig::default());
+    let (warm, hot) = obs.split_at(obs.len() - 10_000);
+    let mut plans = 0usize;
+    for &(t, p) in warm {
+        plans += est.observe(Instant::from_secs_f64(t), p).plan.is_some() as usize;
+    }
+    COUNTING.store(true, Ordering::SeqCst);
+    for &(t, p) in hot {
+        plans += est.observe(Instant::from_secs_f64(t), p).plan.is_some() as usize;
+    }
+    COUNTING.store(false, Ordering::SeqCst);
+    assert_eq!(ALLOCATIONS.load(Ordering::SeqCst), 0, "allocations on the hot path");
+    assert!(plans > 1_000, "only {plans} plans");
+}
