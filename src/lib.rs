@@ -17,8 +17,9 @@
 //! - [`cli`]: the `topspin` command line.
 
 pub mod calib;
-pub mod estimator;
 pub mod cli;
+pub mod estimator;
+pub mod eval;
 pub mod fit;
 pub mod physics;
 pub mod plan;

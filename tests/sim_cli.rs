@@ -17,26 +17,14 @@ fn temp_dir(name: &str) -> PathBuf {
 }
 
 fn run_to(dir: &PathBuf, extra: &[&str]) -> std::process::Output {
-    Command::new(BIN)
-        .args(["sim", "--out"])
-        .arg(dir)
-        .args(extra)
-        .output()
-        .unwrap()
+    Command::new(BIN).args(["sim", "--out"]).arg(dir).args(extra).output().unwrap()
 }
 
 #[test]
 fn writes_csv_truth_and_stream() {
     let dir = temp_dir("files");
-    let out = run_to(
-        &dir,
-        &["--balls", "3", "--seed", "4", "--false-starts", "2"],
-    );
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let out = run_to(&dir, &["--balls", "3", "--seed", "4", "--false-starts", "2"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let stdout = String::from_utf8(out.stdout).unwrap();
     assert_eq!(stdout.lines().count(), 3, "{stdout}");
     assert!(stdout.contains("backspin-medium"), "{stdout}");
@@ -46,17 +34,13 @@ fn writes_csv_truth_and_stream() {
         let csv = std::fs::read_to_string(dir.join(format!("ball-{k:03}.csv"))).unwrap();
         let mut lines = csv.lines();
         assert_eq!(lines.next(), Some("t,x,y,z"));
-        let rows: Vec<Vec<f64>> = lines
-            .map(|l| l.split(',').map(|v| v.parse().unwrap()).collect())
-            .collect();
+        let rows: Vec<Vec<f64>> = lines.map(|l| l.split(',').map(|v| v.parse().unwrap()).collect()).collect();
         assert!(rows.len() > 50, "{} rows", rows.len());
         assert!(rows.windows(2).all(|w| w[1][0] > w[0][0]));
         stream_rows += rows.len();
 
-        let json: serde_json::Value = serde_json::from_str(
-            &std::fs::read_to_string(dir.join(format!("ball-{k:03}.json"))).unwrap(),
-        )
-        .unwrap();
+        let json: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(dir.join(format!("ball-{k:03}.json"))).unwrap()).unwrap();
         let expect = ["backspin-low", "backspin-medium", "backspin-high"][k];
         assert_eq!(json["setting"], expect);
         assert_eq!(json["outliers"], serde_json::json!([0, 1]));
@@ -71,28 +55,15 @@ fn writes_csv_truth_and_stream() {
     let stream = std::fs::read_to_string(dir.join("stream.csv")).unwrap();
     let mut lines = stream.lines();
     assert_eq!(lines.next(), Some("t,x,y,z,ball"));
-    let t: Vec<f64> = lines
-        .map(|l| l.split(',').next().unwrap().parse().unwrap())
-        .collect();
+    let t: Vec<f64> = lines.map(|l| l.split(',').next().unwrap().parse().unwrap()).collect();
     assert_eq!(t.len(), stream_rows);
     assert!(t.windows(2).all(|w| w[1] > w[0]));
 
     // Same seed, same bytes; ball k does not depend on the number of balls.
     let again = temp_dir("files-again");
-    assert!(
-        run_to(
-            &again,
-            &["--balls", "2", "--seed", "4", "--false-starts", "2"]
-        )
-        .status
-        .success()
-    );
+    assert!(run_to(&again, &["--balls", "2", "--seed", "4", "--false-starts", "2"]).status.success());
     for name in ["ball-000.csv", "ball-001.json"] {
-        assert_eq!(
-            std::fs::read(dir.join(name)).unwrap(),
-            std::fs::read(again.join(name)).unwrap(),
-            "{name}"
-        );
+        assert_eq!(std::fs::read(dir.join(name)).unwrap(), std::fs::read(again.join(name)).unwrap(), "{name}");
     }
     let _ = std::fs::remove_dir_all(&dir);
     let _ = std::fs::remove_dir_all(&again);
@@ -101,19 +72,10 @@ fn writes_csv_truth_and_stream() {
 #[test]
 fn streams_one_ball_over_udp() {
     let rx = UdpSocket::bind("127.0.0.1:0").unwrap();
-    rx.set_read_timeout(Some(Duration::from_millis(200)))
-        .unwrap();
+    rx.set_read_timeout(Some(Duration::from_millis(200))).unwrap();
     let addr = rx.local_addr().unwrap().to_string();
     let mut child = Command::new(BIN)
-        .args([
-            "sim",
-            "--to",
-            &addr,
-            "--bind",
-            "127.0.0.1:0",
-            "--balls",
-            "1",
-        ])
+        .args(["sim", "--to", &addr, "--bind", "127.0.0.1:0", "--balls", "1"])
         .args(["--setting", "topspin-high", "--seed", "2"])
         .stdout(Stdio::null())
         .stderr(Stdio::piped())
@@ -147,12 +109,9 @@ fn streams_one_ball_over_udp() {
 #[test]
 fn unusable_input_exits_2_with_one_line() {
     let dir = temp_dir("bad");
-    for args in [
-        vec!["--setting", "curveball-low"],
-        vec!["--noise-mm", "-1"],
-        vec!["--rate", "0"],
-        vec!["--physics", "vacuum"],
-    ] {
+    for args in
+        [vec!["--setting", "curveball-low"], vec!["--noise-mm", "-1"], vec!["--rate", "0"], vec!["--physics", "vacuum"]]
+    {
         let out = run_to(&dir, &args);
         assert_eq!(out.status.code(), Some(2), "{args:?}");
         let err = String::from_utf8(out.stderr).unwrap();

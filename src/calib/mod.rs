@@ -194,10 +194,12 @@ mod tests {
     fn a_bad_value_is_named() {
         let dir = std::env::temp_dir().join(format!("topspin-calib-test-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
-        std::fs::write(dir.join("strike.toml"), DEFAULT_STRIKE.replace("hit_plane_x = 1.60", "hit_plane_x = -3.0")).unwrap();
+        std::fs::write(dir.join("strike.toml"), DEFAULT_STRIKE.replace("hit_plane_x = 1.60", "hit_plane_x = -3.0"))
+            .unwrap();
         let e = Calibration::load(Some(&dir)).unwrap_err().to_string();
         assert!(e.contains("strike.hit_plane_x"), "{e}");
-        std::fs::write(dir.join("strike.toml"), DEFAULT_STRIKE.replace("hit_plane_x = 1.60", "hit_plane = 1.6")).unwrap();
+        std::fs::write(dir.join("strike.toml"), DEFAULT_STRIKE.replace("hit_plane_x = 1.60", "hit_plane = 1.6"))
+            .unwrap();
         let e = Calibration::load(Some(&dir)).unwrap_err().to_string();
         assert!(e.contains("hit_plane"), "{e}");
         std::fs::remove_dir_all(&dir).unwrap();

@@ -87,9 +87,7 @@ fn parse_settings(s: &str) -> Result<Vec<Setting>, BadInput> {
     if s.trim().eq_ignore_ascii_case("all") {
         return Ok(Setting::ALL.to_vec());
     }
-    s.split(',')
-        .map(|n| n.parse::<Setting>().map_err(|e| BadInput(e.to_string())))
-        .collect()
+    s.split(',').map(|n| n.parse::<Setting>().map_err(|e| BadInput(e.to_string()))).collect()
 }
 
 fn bad(msg: impl Into<String>) -> anyhow::Error {
@@ -125,9 +123,7 @@ fn plan(a: &SimOptions) -> anyhow::Result<Plan> {
         "calibrated" => cal,
         "paper" => cal.with_paper_physics(),
         other => {
-            return Err(bad(format!(
-                "--physics `{other}`: expected `calibrated` or `paper`"
-            )));
+            return Err(bad(format!("--physics `{other}`: expected `calibrated` or `paper`")));
         }
     };
     Ok(Plan {
@@ -173,8 +169,7 @@ pub fn run(args: SimArgs) -> anyhow::Result<()> {
     let mut balls = Vec::with_capacity(a.balls);
     for k in 0..a.balls {
         let setting = p.settings[k % p.settings.len()];
-        let ball = sim::simulate_ball(a.seed, k, setting, &prop, x_hit, &p.tracker)
-            .map_err(|e| bad(e.to_string()))?;
+        let ball = sim::simulate_ball(a.seed, k, setting, &prop, x_hit, &p.tracker).map_err(|e| bad(e.to_string()))?;
         balls.push(ball);
     }
     let ends: Vec<f64> = balls.iter().map(|b| b.truth.end_t).collect();
@@ -207,60 +202,30 @@ fn summary(b: &SimBall) -> String {
     );
     match &t.bounce {
         Some(bn) => {
-            let _ = write!(
-                s,
-                " bounce x,y ({:.3}, {:.3}) at {:.3} s",
-                bn.pos[0], bn.pos[1], bn.t
-            );
+            let _ = write!(s, " bounce x,y ({:.3}, {:.3}) at {:.3} s", bn.pos[0], bn.pos[1], bn.t);
         }
         None => s.push_str(" bounce -"),
     }
     match &t.hit {
         Some(h) => {
-            let _ = write!(
-                s,
-                " hit y,z ({:.3}, {:.3}) at {:.3} s",
-                h.pos[1], h.pos[2], h.t
-            );
+            let _ = write!(s, " hit y,z ({:.3}, {:.3}) at {:.3} s", h.pos[1], h.pos[2], h.t);
         }
         None => s.push_str(" hit -"),
     }
-    let _ = write!(
-        s,
-        " samples {} outliers {}",
-        b.observations.len(),
-        b.observations.iter().filter(|o| o.outlier).count()
-    );
+    let _ =
+        write!(s, " samples {} outliers {}", b.observations.len(), b.observations.iter().filter(|o| o.outlier).count());
     s
 }
 
-fn write_files(
-    dir: &Path,
-    a: &SimOptions,
-    p: &Plan,
-    balls: &[SimBall],
-    starts: &[f64],
-) -> anyhow::Result<()> {
+fn write_files(dir: &Path, a: &SimOptions, p: &Plan, balls: &[SimBall], starts: &[f64]) -> anyhow::Result<()> {
     let io = |what: &Path, e: std::io::Error| bad(format!("cannot write {}: {e}", what.display()));
     std::fs::create_dir_all(dir).map_err(|e| io(dir, e))?;
     let mut stream_csv = String::from("t,x,y,z,ball\n");
     for (b, start) in balls.iter().zip(starts) {
         let mut csv = String::from("t,x,y,z\n");
         for o in &b.observations {
-            let _ = writeln!(
-                csv,
-                "{:.9},{:.6},{:.6},{:.6}",
-                o.t, o.pos.x, o.pos.y, o.pos.z
-            );
-            let _ = writeln!(
-                stream_csv,
-                "{:.9},{:.6},{:.6},{:.6},{}",
-                o.t + start,
-                o.pos.x,
-                o.pos.y,
-                o.pos.z,
-                b.index
-            );
+            let _ = writeln!(csv, "{:.9},{:.6},{:.6},{:.6}", o.t, o.pos.x, o.pos.y, o.pos.z);
+            let _ = writeln!(stream_csv, "{:.9},{:.6},{:.6},{:.6},{}", o.t + start, o.pos.x, o.pos.y, o.pos.z, b.index);
         }
         let path = dir.join(format!("ball-{:03}.csv", b.index));
         std::fs::write(&path, csv).map_err(|e| io(&path, e))?;
@@ -290,17 +255,9 @@ fn write_files(
 /// Sends every observation as a TTB1 datagram at its arrival time
 /// (capture + latency) on the wall clock. The capture clock counts ns from
 /// the start of the stream; ball k is launched at `STREAM_LEAD + starts[k]`.
-fn stream(
-    to: &str,
-    bind: &str,
-    tracker: &TrackerModel,
-    balls: &[SimBall],
-    starts: &[f64],
-) -> anyhow::Result<()> {
+fn stream(to: &str, bind: &str, tracker: &TrackerModel, balls: &[SimBall], starts: &[f64]) -> anyhow::Result<()> {
     let socket = UdpSocket::bind(bind).map_err(|e| bad(format!("--bind {bind}: {e}")))?;
-    socket
-        .connect(to)
-        .map_err(|e| bad(format!("--to {to}: {e}")))?;
+    socket.connect(to).map_err(|e| bad(format!("--to {to}: {e}")))?;
     let epoch = std::time::Instant::now();
     let mut seq: u32 = 0;
     let mut buf = [0u8; OBSERVATION_LEN];

@@ -101,13 +101,34 @@ pub enum EndReason {
 /// Something the telemetry may log.
 #[derive(Copy, Clone, Debug, PartialEq)]
 pub enum EstimatorEvent {
-    Started { trajectory: u32, t: f64, start_outliers: u8 },
-    Ended { trajectory: u32, t: f64, reason: EndReason },
+    Started {
+        trajectory: u32,
+        t: f64,
+        start_outliers: u8,
+    },
+    Ended {
+        trajectory: u32,
+        t: f64,
+        reason: EndReason,
+    },
     /// A candidate that did not move towards the robot.
-    Discarded { t: f64 },
-    Rejected { trajectory: u32, t: f64, d2: f64 },
-    Bounce { trajectory: u32, t: f64 },
-    Withheld { trajectory: u32, t: f64, reason: Withheld },
+    Discarded {
+        t: f64,
+    },
+    Rejected {
+        trajectory: u32,
+        t: f64,
+        d2: f64,
+    },
+    Bounce {
+        trajectory: u32,
+        t: f64,
+    },
+    Withheld {
+        trajectory: u32,
+        t: f64,
+        reason: Withheld,
+    },
 }
 
 /// What one observation produced.

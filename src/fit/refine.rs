@@ -54,7 +54,7 @@ impl Default for RefineConfig {
             noise: 0.002,
             huber_k: 2.5,
             reject_sigma: 6.0,
-            prior_along_velocity: 50.0,
+            prior_along_velocity: 15.0,
             prior_spin: 3000.0,
             max_iterations: 30,
             fix_spin: false,

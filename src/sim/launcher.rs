@@ -141,11 +141,7 @@ impl Setting {
             (Topspin, Medium) => (Range::new(8.0, 9.0), Range::new(55.0, 65.0)),
             (Topspin, High) => (Range::new(10.0, 11.5), Range::new(85.0, 100.0)),
         };
-        Distribution {
-            speed,
-            spin_rps,
-            axis_roll_deg: 5.0,
-        }
+        Distribution { speed, spin_rps, axis_roll_deg: 5.0 }
     }
 }
 
@@ -177,19 +173,14 @@ impl fmt::Display for Setting {
 
 /// A setting name that is not one of the nine.
 #[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
-#[error(
-    "unknown launcher setting `{0}` (expected e.g. backspin-low, sidespin-medium, topspin-high)"
-)]
+#[error("unknown launcher setting `{0}` (expected e.g. backspin-low, sidespin-medium, topspin-high)")]
 pub struct UnknownSetting(pub String);
 
 impl FromStr for Setting {
     type Err = UnknownSetting;
     fn from_str(s: &str) -> Result<Self, Self::Err> {
         let name = s.trim().to_ascii_lowercase();
-        Setting::ALL
-            .into_iter()
-            .find(|k| k.to_string() == name)
-            .ok_or_else(|| UnknownSetting(s.to_owned()))
+        Setting::ALL.into_iter().find(|k| k.to_string() == name).ok_or_else(|| UnknownSetting(s.to_owned()))
     }
 }
 
@@ -216,9 +207,7 @@ pub struct Launch {
 /// No draw of a setting gave a ball that bounces on the robot's half and
 /// reaches the hitting plane (possible only with odd physics or geometry).
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
-#[error(
-    "launcher setting {setting} found no valid shot in {attempts} draws (check physics, table and hit_plane_x)"
-)]
+#[error("launcher setting {setting} found no valid shot in {attempts} draws (check physics, table and hit_plane_x)")]
 pub struct NoValidShot {
     pub setting: Setting,
     pub attempts: usize,
@@ -241,31 +230,15 @@ struct Draw {
 impl Draw {
     fn sample(setting: Setting, rng: &mut impl Rng) -> Draw {
         let d = setting.distribution();
-        let origin = Vec3::new(
-            LAUNCH_X.sample(rng),
-            Range::new(-LAUNCH_Y_MAX, LAUNCH_Y_MAX).sample(rng),
-            LAUNCH_Z.sample(rng),
-        );
+        let origin =
+            Vec3::new(LAUNCH_X.sample(rng), Range::new(-LAUNCH_Y_MAX, LAUNCH_Y_MAX).sample(rng), LAUNCH_Z.sample(rng));
         let speed = d.speed.sample(rng);
         let spin = rps_to_rad(d.spin_rps.sample(rng));
-        let roll = Range::new(-d.axis_roll_deg, d.axis_roll_deg)
-            .sample(rng)
-            .to_radians();
+        let roll = Range::new(-d.axis_roll_deg, d.axis_roll_deg).sample(rng).to_radians();
         let side_sign = if rng.random::<bool>() { 1.0 } else { -1.0 };
         let tilt = SIDESPIN_TILT_DEG.sample(rng).to_radians();
-        let target = (
-            TARGET_X.sample(rng),
-            Range::new(-TARGET_Y_MAX, TARGET_Y_MAX).sample(rng),
-        );
-        Draw {
-            origin,
-            speed,
-            spin,
-            roll,
-            side_sign,
-            tilt,
-            target,
-        }
+        let target = (TARGET_X.sample(rng), Range::new(-TARGET_Y_MAX, TARGET_Y_MAX).sample(rng));
+        Draw { origin, speed, spin, roll, side_sign, tilt, target }
     }
 
     /// The state at launch for elevation `el` and azimuth `az` (rad).
@@ -277,14 +250,10 @@ impl Draw {
         let axis = match spin_type {
             SpinType::Topspin => across,
             SpinType::Backspin => -across,
-            SpinType::Sidespin => {
-                up * (self.side_sign * self.tilt.cos()) - across * self.tilt.sin()
-            }
+            SpinType::Sidespin => up * (self.side_sign * self.tilt.cos()) - across * self.tilt.sin(),
         };
         // Roll about the exit velocity keeps the axis ⟂ to it.
-        let axis =
-            nalgebra::Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(dir), self.roll)
-                * axis;
+        let axis = nalgebra::Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(dir), self.roll) * axis;
         BallState::new(self.origin, dir * self.speed, axis * self.spin)
     }
 }
@@ -293,11 +262,7 @@ impl Draw {
 /// unbounded table without a net: (x, y), or `None` if it never does.
 fn landing(prop: &Propagator, s: &BallState) -> Option<(f64, f64)> {
     let mut p = *prop;
-    p.table = Table {
-        length: 1e4,
-        width: 1e4,
-        ..prop.table
-    };
+    p.table = Table { length: 1e4, width: 1e4, ..prop.table };
     let mut s = *s;
     let mut t = 0.0;
     match p.advance(&mut s, &mut t, &StopAt::time(T_MAX)) {
@@ -314,8 +279,7 @@ fn aim(draw: &Draw, spin_type: SpinType, prop: &Propagator) -> Option<(f64, f64)
     for _ in 0..12 {
         // Range: landing x (along the aim) grows with the elevation.
         let range = |el: f64| -> Option<f64> {
-            landing(prop, &draw.state(spin_type, el, az))
-                .map(|(x, y)| (x - o.x) * az.cos() + (y - o.y) * az.sin())
+            landing(prop, &draw.state(spin_type, el, az)).map(|(x, y)| (x - o.x) * az.cos() + (y - o.y) * az.sin())
         };
         let want = (tx - o.x) * az.cos() + (ty - o.y) * az.sin();
         let (mut lo, mut hi) = ELEVATION;
@@ -347,11 +311,7 @@ fn aim(draw: &Draw, spin_type: SpinType, prop: &Propagator) -> Option<(f64, f64)
 /// True when the real table and net accept the shot: first event a bounce
 /// on the robot's half, then the hitting plane before anything else.
 fn accepted(prop: &Propagator, s: &BallState, hit_plane_x: f64) -> bool {
-    let stop = StopAt {
-        t_max: T_MAX,
-        hit_plane_x: Some(hit_plane_x),
-        net: true,
-    };
+    let stop = StopAt { t_max: T_MAX, hit_plane_x: Some(hit_plane_x), net: true };
     let (mut s, mut t) = (*s, 0.0);
     match prop.advance(&mut s, &mut t, &stop) {
         Event::Bounce { before, .. } if before.pos.x > 0.0 => {}
@@ -380,10 +340,7 @@ pub fn launch(
             return Ok(Launch { setting, state });
         }
     }
-    Err(NoValidShot {
-        setting,
-        attempts: MAX_ATTEMPTS,
-    })
+    Err(NoValidShot { setting, attempts: MAX_ATTEMPTS })
 }
 
 #[cfg(test)]
@@ -398,10 +355,7 @@ mod tests {
         for s in Setting::ALL {
             assert_eq!(s.to_string().parse::<Setting>().unwrap(), s);
         }
-        assert_eq!(
-            "Topspin-High".parse::<Setting>().unwrap(),
-            Setting::new(SpinType::Topspin, Power::High)
-        );
+        assert_eq!("Topspin-High".parse::<Setting>().unwrap(), Setting::new(SpinType::Topspin, Power::High));
         assert!("topspin-max".parse::<Setting>().is_err());
         let json = serde_json::to_string(&Setting::ALL[4]).unwrap();
         assert_eq!(json, "\"sidespin-medium\"");
@@ -447,20 +401,8 @@ mod tests {
     #[test]
     fn same_seed_same_ball() {
         let prop = Calibration::default_cell().propagator();
-        let a = launch(
-            Setting::ALL[8],
-            &prop,
-            1.6,
-            &mut ChaCha8Rng::seed_from_u64(3),
-        )
-        .unwrap();
-        let b = launch(
-            Setting::ALL[8],
-            &prop,
-            1.6,
-            &mut ChaCha8Rng::seed_from_u64(3),
-        )
-        .unwrap();
+        let a = launch(Setting::ALL[8], &prop, 1.6, &mut ChaCha8Rng::seed_from_u64(3)).unwrap();
+        let b = launch(Setting::ALL[8], &prop, 1.6, &mut ChaCha8Rng::seed_from_u64(3)).unwrap();
         assert_eq!(a, b);
     }
 }

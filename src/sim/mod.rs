@@ -49,11 +49,7 @@ pub struct SimBall {
 impl SimBall {
     /// 0-based indices of the false detections among the observations.
     pub fn outlier_rows(&self) -> Vec<usize> {
-        self.observations
-            .iter()
-            .enumerate()
-            .filter_map(|(i, o)| o.outlier.then_some(i))
-            .collect()
+        self.observations.iter().enumerate().filter_map(|(i, o)| o.outlier.then_some(i)).collect()
     }
 }
 
@@ -70,11 +66,7 @@ pub fn simulate_ball(
     let l = launch(setting, prop, hit_plane_x, &mut rng_l)?;
     let truth = Truth::compute(&l, prop, hit_plane_x);
     let observations = observe(&truth, prop, tracker, 0.0, &mut rng_t);
-    Ok(SimBall {
-        index: k,
-        truth,
-        observations,
-    })
+    Ok(SimBall { index: k, truth, observations })
 }
 
 /// Launch times of balls back to back: one every `gap` s, but never before
@@ -107,11 +99,7 @@ mod tests {
         let other = simulate_ball(7, 4, Setting::ALL[3], &prop, 1.6, &m).unwrap();
         assert_ne!(a.truth, other.truth);
         // Tracker options do not change the flight.
-        let noisy = TrackerModel {
-            false_starts: 2,
-            dropout: 0.3,
-            ..m
-        };
+        let noisy = TrackerModel { false_starts: 2, dropout: 0.3, ..m };
         let c = simulate_ball(7, 3, Setting::ALL[3], &prop, 1.6, &noisy).unwrap();
         assert_eq!(a.truth, c.truth);
         assert_eq!(c.outlier_rows(), vec![0, 1]);

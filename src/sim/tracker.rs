@@ -60,11 +60,7 @@ pub struct SimObservation {
 /// A random unit vector (uniform on the sphere).
 fn unit(rng: &mut impl Rng) -> Vec3 {
     loop {
-        let v = Vec3::new(
-            rng.sample(StandardNormal),
-            rng.sample(StandardNormal),
-            rng.sample(StandardNormal),
-        );
+        let v = Vec3::new(rng.sample(StandardNormal), rng.sample(StandardNormal), rng.sample(StandardNormal));
         let n = v.norm();
         if n > 1e-6 {
             return v / n;
@@ -91,11 +87,7 @@ pub fn observe(
     let period = 1.0 / model.rate_hz;
     let phase = rng.random::<f64>() * period;
     let end = truth.end_t + model.end_after.max(0.0);
-    let sigma = if model.noise_sigma.is_finite() {
-        model.noise_sigma.max(0.0)
-    } else {
-        0.0
-    };
+    let sigma = if model.noise_sigma.is_finite() { model.noise_sigma.max(0.0) } else { 0.0 };
     let mut frame = 0usize;
     loop {
         let t = phase + frame as f64 * period;
@@ -114,17 +106,9 @@ pub fn observe(
         if frame < model.false_starts {
             let (lo, hi) = FALSE_START_DISTANCE;
             let d = lo + (hi - lo) * rng.random::<f64>();
-            out.push(SimObservation {
-                t: t + t_offset,
-                pos: ball + unit(rng) * d + noise,
-                outlier: true,
-            });
+            out.push(SimObservation { t: t + t_offset, pos: ball + unit(rng) * d + noise, outlier: true });
         } else if !lost {
-            out.push(SimObservation {
-                t: t + t_offset,
-                pos: ball + noise,
-                outlier: false,
-            });
+            out.push(SimObservation { t: t + t_offset, pos: ball + noise, outlier: false });
         }
         frame += 1;
     }
@@ -150,10 +134,7 @@ mod tests {
 
     #[test]
     fn noise_has_the_asked_spread_and_sampling_covers_the_flight() {
-        let model = TrackerModel {
-            noise_sigma: 0.002,
-            ..TrackerModel::default()
-        };
+        let model = TrackerModel { noise_sigma: 0.002, ..TrackerModel::default() };
         let mut sum2 = [0.0; 3];
         let mut n = 0usize;
         for k in 0..9 {
@@ -184,11 +165,7 @@ mod tests {
 
     #[test]
     fn false_starts_come_first_and_are_labelled() {
-        let model = TrackerModel {
-            false_starts: 3,
-            dropout: 0.2,
-            ..TrackerModel::default()
-        };
+        let model = TrackerModel { false_starts: 3, dropout: 0.2, ..TrackerModel::default() };
         let (truth, prop) = truth(4);
         let mut rng = ChaCha8Rng::seed_from_u64(9);
         let obs = observe(&truth, &prop, &model, 0.0, &mut rng);
@@ -199,13 +176,7 @@ mod tests {
             assert!((0.02..0.21).contains(&d), "false start {d} m from the ball");
         }
         // Dropout thins the real samples.
-        let full = observe(
-            &truth,
-            &prop,
-            &TrackerModel::default(),
-            0.0,
-            &mut ChaCha8Rng::seed_from_u64(9),
-        );
+        let full = observe(&truth, &prop, &TrackerModel::default(), 0.0, &mut ChaCha8Rng::seed_from_u64(9));
         let real = obs.len() - 3;
         assert!(real < full.len() - 3 && real as f64 > 0.6 * full.len() as f64);
     }

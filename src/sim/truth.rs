@@ -24,11 +24,7 @@ pub struct StateRecord {
 
 impl From<&BallState> for StateRecord {
     fn from(s: &BallState) -> Self {
-        StateRecord {
-            pos: s.pos.into(),
-            vel: s.vel.into(),
-            spin: s.spin.into(),
-        }
+        StateRecord { pos: s.pos.into(), vel: s.vel.into(), spin: s.spin.into() }
     }
 }
 
@@ -102,11 +98,7 @@ impl Truth {
                     match prop.advance(
                         &mut s,
                         &mut t,
-                        &StopAt {
-                            t_max: FLIGHT_T_MAX,
-                            hit_plane_x: Some(0.0),
-                            net: false,
-                        },
+                        &StopAt { t_max: FLIGHT_T_MAX, hit_plane_x: Some(0.0), net: false },
                     ) {
                         Event::HitPlane { t } => break Some(t),
                         Event::Bounce { .. } => continue,
@@ -116,11 +108,7 @@ impl Truth {
             })
             .flatten();
 
-        let stop = StopAt {
-            t_max: FLIGHT_T_MAX,
-            hit_plane_x: Some(hit_plane_x),
-            net: false,
-        };
+        let stop = StopAt { t_max: FLIGHT_T_MAX, hit_plane_x: Some(hit_plane_x), net: false };
         let (mut s, mut t) = (s0, 0.0);
         let mut bounce = None;
         let mut hit = None;
@@ -139,12 +127,7 @@ impl Truth {
                 }
                 Event::HitPlane { t } => {
                     if bounce.is_some() {
-                        hit = Some(HitTruth {
-                            t,
-                            pos: s.pos.into(),
-                            vel: s.vel.into(),
-                            spin: s.spin.into(),
-                        });
+                        hit = Some(HitTruth { t, pos: s.pos.into(), vel: s.vel.into(), spin: s.spin.into() });
                     }
                     break t;
                 }
@@ -166,10 +149,7 @@ impl Truth {
 
     /// The launch as a [`Launch`] again.
     pub fn to_launch(&self) -> Launch {
-        Launch {
-            setting: self.setting,
-            state: (&self.launch).into(),
-        }
+        Launch { setting: self.setting, state: (&self.launch).into() }
     }
 }
 
@@ -184,11 +164,7 @@ pub struct Flight<'a> {
 impl<'a> Flight<'a> {
     /// Starts at the launch (t = 0).
     pub fn new(launch: &Launch, prop: &'a Propagator) -> Self {
-        Flight {
-            prop,
-            state: launch.state,
-            t: 0.0,
-        }
+        Flight { prop, state: launch.state, t: 0.0 }
     }
 
     /// The state at `t` (≥ the last time asked; earlier times return the

@@ -36,10 +36,7 @@ pub const FLAGS_RESERVED: u16 = !FLAG_VALID;
 /// The generous box around the table (table frame, m) outside which a
 /// position is rejected as implausible: |x| ≤ 4, |y| ≤ 3, −1 ≤ z ≤ 4.
 /// The table is 2.74 × 1.525 m, the floor 0.76 m below its surface.
-pub const POSITION_BOX: PositionBox = PositionBox {
-    min: [-4.0, -3.0, -1.0],
-    max: [4.0, 3.0, 4.0],
-};
+pub const POSITION_BOX: PositionBox = PositionBox { min: [-4.0, -3.0, -1.0], max: [4.0, 3.0, 4.0] };
 
 /// An axis-aligned box in the table frame, m.
 #[derive(Copy, Clone, Debug, PartialEq)]
@@ -233,11 +230,7 @@ impl Observation {
             return Err(WireError::NonFinite);
         }
         if !POSITION_BOX.contains(&pos) {
-            return Err(WireError::OutOfBox {
-                x: pos[0],
-                y: pos[1],
-                z: pos[2],
-            });
+            return Err(WireError::OutOfBox { x: pos[0], y: pos[1], z: pos[2] });
         }
         let residual = p.residual();
         if !(residual.is_nan() || (residual.is_finite() && residual >= 0.0)) {
@@ -322,27 +315,15 @@ mod tests {
         sample().emit(&mut buf);
         assert!(same(&Observation::parse(&buf).unwrap(), &sample()));
 
-        assert_eq!(
-            Observation::parse(&buf[..35]),
-            Err(WireError::WrongLength { len: 35 })
-        );
+        assert_eq!(Observation::parse(&buf[..35]), Err(WireError::WrongLength { len: 35 }));
         let mut long = [0u8; 37];
         long[..36].copy_from_slice(&buf);
-        assert_eq!(
-            Observation::parse(&long),
-            Err(WireError::WrongLength { len: 37 })
-        );
-        assert_eq!(
-            Observation::parse(&[]),
-            Err(WireError::WrongLength { len: 0 })
-        );
+        assert_eq!(Observation::parse(&long), Err(WireError::WrongLength { len: 37 }));
+        assert_eq!(Observation::parse(&[]), Err(WireError::WrongLength { len: 0 }));
 
         let mut b = buf;
         b[3] = b'2';
-        assert!(matches!(
-            Observation::parse(&b),
-            Err(WireError::WrongMagic { .. })
-        ));
+        assert!(matches!(Observation::parse(&b), Err(WireError::WrongMagic { .. })));
 
         let mut b = buf;
         b[20..24].copy_from_slice(&f32::INFINITY.to_le_bytes());
@@ -352,30 +333,18 @@ mod tests {
 
         let mut b = buf;
         b[24..28].copy_from_slice(&(-1.5f32).to_le_bytes());
-        assert!(matches!(
-            Observation::parse(&b),
-            Err(WireError::OutOfBox { .. })
-        ));
+        assert!(matches!(Observation::parse(&b), Err(WireError::OutOfBox { .. })));
 
         let mut b = buf;
         b[28..32].copy_from_slice(&(-0.1f32).to_le_bytes());
-        assert!(matches!(
-            Observation::parse(&b),
-            Err(WireError::BadResidual { .. })
-        ));
+        assert!(matches!(Observation::parse(&b), Err(WireError::BadResidual { .. })));
 
         let mut b = buf;
         b[34] = 0x03;
-        assert_eq!(
-            Observation::parse(&b),
-            Err(WireError::ReservedFlags { flags: 3 })
-        );
+        assert_eq!(Observation::parse(&b), Err(WireError::ReservedFlags { flags: 3 }));
         b[34] = 0;
         b[35] = 0x80;
-        assert!(matches!(
-            Observation::parse(&b),
-            Err(WireError::ReservedFlags { .. })
-        ));
+        assert!(matches!(Observation::parse(&b), Err(WireError::ReservedFlags { .. })));
 
         let mut b = buf;
         b[34] = 0;
@@ -391,16 +360,14 @@ mod tests {
             any::<u16>(),
             any::<bool>(),
         )
-            .prop_map(
-                |(seq, ns, (x, y, z), residual, cameras, valid)| Observation {
-                    seq,
-                    capture: Instant::from_nanos(ns),
-                    pos: [x, y, z],
-                    residual,
-                    cameras,
-                    valid,
-                },
-            )
+            .prop_map(|(seq, ns, (x, y, z), residual, cameras, valid)| Observation {
+                seq,
+                capture: Instant::from_nanos(ns),
+                pos: [x, y, z],
+                residual,
+                cameras,
+                valid,
+            })
     }
 
     proptest! {
