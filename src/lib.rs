@@ -14,10 +14,13 @@
 //!   realistic observations with ground truth.
 //! - [`wire`]: the datagram codecs (checked view over bytes, validated value).
 //! - [`calib`]: the calibration files in `calib/`.
+//! - [`data`]: real recorded trajectories (MPI launcher set), their frame,
+//!   and the real-data evaluation and calibration harness.
 //! - [`cli`]: the `topspin` command line.
 
 pub mod calib;
 pub mod cli;
+pub mod data;
 pub mod fit;
 pub mod physics;
 pub mod plan;
