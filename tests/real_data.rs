@@ -134,7 +134,12 @@ fn baseline_harness_runs_with_sane_errors() {
 #[test]
 fn calibration_of_drag_and_bounce_does_not_hurt_validation() {
     let Some(trajs) = data() else { return };
-    let prepared = prepare(&trajs, &MPI_LAB_TO_TABLE);
+    // Spin-free shots only: with the spin fixed at zero, the spin sets
+    // would bend C_D to absorb their Magnus force.
+    let prepared: Vec<_> = prepare(&trajs, &MPI_LAB_TO_TABLE)
+        .into_iter()
+        .filter(|t| t.set.ends_with("no_spin"))
+        .collect();
     let (train, validation) = split_even_odd(&prepared);
     let setup = CalibrationSetup::drag_and_bounce(PhysicsParams::paper());
     let r = calibrate(&train, &validation, |_| CubicBaseline, &paper_cfg(), &setup);
@@ -153,4 +158,71 @@ fn calibration_of_drag_and_bounce_does_not_hurt_validation() {
     // Not a fit to noise: the held-out half improves too (or at worst
     // stays within a few mm).
     assert!(r.validation_after < r.validation_before + 5.0, "{r:?}");
+}
+
+/// The numbers in `docs/real-data.md`: `cargo test --release --test
+/// real_data -- --ignored --nocapture`.
+#[test]
+#[ignore = "prints the report for docs/real-data.md"]
+fn report_for_the_docs() {
+    use topspin::data::calibrate::{CalibParam, Objective};
+    use topspin::data::frame::LabToTable;
+    let Some(trajs) = data() else { return };
+    let prepared = prepare(&trajs, &MPI_LAB_TO_TABLE);
+    for horizon in [0.2, 0.3] {
+        let mut cfg = paper_cfg();
+        cfg.horizon = horizon;
+        println!(
+            "baseline, horizon {horizon} s:\n{}",
+            evaluate(&prepared, &CubicBaseline, &cfg)
+        );
+    }
+    // Sensitivity to the net's placement (which samples count as pre-net).
+    for dx in [-0.1, 0.1] {
+        let mut f: LabToTable = MPI_LAB_TO_TABLE;
+        f.origin[0] += dx;
+        let rep = evaluate(&prepare(&trajs, &f), &CubicBaseline, &paper_cfg());
+        println!("net moved by {dx:+} m:\n{rep}");
+    }
+    // Calibrate on the spin-free shots only: with spin fixed at zero, the
+    // spin sets would bend C_D to absorb their Magnus force.
+    let no_spin: Vec<_> = prepared
+        .iter()
+        .filter(|t| t.set.ends_with("no_spin"))
+        .cloned()
+        .collect();
+    let (train, validation) = split_even_odd(&no_spin);
+    for objective in [Objective::MedianSum, Objective::MeanSum] {
+        let mut setup = CalibrationSetup::drag_and_bounce(PhysicsParams::paper());
+        setup.objective = objective;
+        setup.max_evals = 300;
+        setup.tolerance = 0.01;
+        let r = calibrate(&train, &validation, |_| CubicBaseline, &paper_cfg(), &setup);
+        println!(
+            "{objective:?}: {:?} in {} evaluations; train {:.1} -> {:.1} mm, validation {:.1} -> {:.1} mm\ntrain:\n{}validation:\n{}",
+            r.values,
+            r.evaluations,
+            r.train_before,
+            r.train_after,
+            r.validation_before,
+            r.validation_after,
+            r.train,
+            r.validation
+        );
+        let all = topspin::data::calibrate::evaluate_with(
+            &prepared,
+            &|_: &PhysicsParams| CubicBaseline,
+            &paper_cfg(),
+            &r.params,
+        );
+        println!("all sets with these constants:\n{all}");
+    }
+    // Drag alone.
+    let mut setup = CalibrationSetup::drag_and_bounce(PhysicsParams::paper());
+    setup.params = vec![CalibParam::DragCoefficient];
+    let r = calibrate(&train, &validation, |_| CubicBaseline, &paper_cfg(), &setup);
+    println!(
+        "C_D only: {:?}; train {:.1} -> {:.1}, validation {:.1} -> {:.1}",
+        r.values, r.train_before, r.train_after, r.validation_before, r.validation_after
+    );
 }

@@ -239,6 +239,8 @@ pub struct GroupReport {
 /// names), all pooled, and every trajectory's result.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Report {
+    /// The horizon of (b), s.
+    pub horizon: f64,
     pub sets: Vec<GroupReport>,
     pub all: GroupReport,
     pub results: Vec<TrajectoryResult>,
@@ -254,7 +256,7 @@ impl std::fmt::Display for Report {
                 g.used,
                 g.trajectories,
                 g.bounce,
-                HORIZON,
+                self.horizon,
                 g.ahead,
                 g.no_real_bounce,
                 g.no_predicted_bounce,
@@ -402,7 +404,12 @@ pub fn evaluate<P: Predictor + ?Sized>(
         })
         .collect();
     let all = group("all", &results.iter().collect::<Vec<_>>(), cfg);
-    Report { sets, all, results }
+    Report {
+        horizon: cfg.horizon,
+        sets,
+        all,
+        results,
+    }
 }
 
 #[cfg(test)]

@@ -25,21 +25,26 @@ pub struct LabToTable {
     pub origin: [f64; 3],
 }
 
-/// The transform used for the MPI launcher set (see `docs/real-data.md`):
+/// The transform used for the MPI launcher set (evidence and reasoning in
+/// `docs/real-data.md`; [`estimate_frame`] recomputes it):
 ///
-/// - surface z = 0.7445 m (lab): median of 87 detected bounce contacts
-///   minus r; standard error < 1 mm, spread 2.7 mm, systematic ±5 mm (the
-///   true radius of the tracked blob, the tracker's z bias).
+/// - surface z = 0.7394 m (lab): median over 73 first contacts of the
+///   contact height (where the free-flight parabolas before and after
+///   meet) minus r. Statistical: SE 0.2 mm, spread 1.2 mm. This is the
+///   *effective* plane of the bounce model (contact at z = r); the physical
+///   top may sit a few mm higher (ball compression, tracker bias), which
+///   is why it is 5.5 mm below the data README's 0.745 m.
 /// - yaw = 0: the lab's x axis is taken as the table's long axis. Shot
-///   headings are +0.4° ± 0.9° (median, spread); a yaw error of 1° moves a
-///   point 2 m down the table by 35 mm sideways.
-/// - net at lab x = 1.37 m (lab x = 0 is the opponent's end line): bounds
-///   from the data are [1.21, 1.92] m; the robot set is cut at
-///   x = 2.740 m = 2 × 1.37; the launcher sits at x ≈ 0, 0.32 m above the
-///   surface. Uncertainty ≈ ±0.1 m (judgement, not a statistic).
-/// - centre line at lab y = 0 (the launcher's y ≈ 0.005 m); nothing in the
-///   data pins it better than ±0.2 m, and y enters the evaluation only
-///   through the table's side edges.
+///   headings are +0.5° (median), spread 1.8°: launcher aim and table yaw
+///   cannot be told apart; a 1° error moves a point 2 m away by 35 mm
+///   sideways.
+/// - net at lab x = 1.37 m, i.e. lab x = 0 is the opponent's end line. The
+///   data bound it to [1.19, 1.68] m (first bounces on the robot's half;
+///   every ball clears the net); the robot set is cut at x = 2.740 m
+///   = 2 × 1.37; the launcher exit is at x ≈ 0.00–0.02 m. Uncertainty
+///   ±0.1 m (judgement, not a statistic).
+/// - centre line at lab y = 0 (the launcher's y ≈ 0.005 m); nothing pins
+///   it better than ±0.2 m; it matters only for the table's side edges.
 pub const MPI_LAB_TO_TABLE: LabToTable = LabToTable {
     yaw: 0.0,
     origin: [1.37, 0.0, 0.7394],
@@ -99,8 +104,11 @@ pub struct BounceSearch {
     /// Samples fitted on each side (at most), and the fewest accepted.
     pub side_samples: usize,
     pub min_side_samples: usize,
-    /// Samples farther than this from the lowest one are not fitted, s.
+    /// Samples farther than this from the sample next to the contact are
+    /// not fitted, s.
     pub side_window: f64,
+    /// No contact is located across a longer gap between samples, s.
+    pub max_contact_gap: f64,
 }
 
 /// The fewest samples on each side of a bounce for the two parabolas.
@@ -118,7 +126,8 @@ impl BounceSearch {
             band: 0.05,
             side_samples: 7,
             min_side_samples: MIN_SIDE_SAMPLES,
-            side_window: 0.05,
+            side_window: 0.04,
+            max_contact_gap: 0.05,
         }
     }
 }
@@ -169,15 +178,24 @@ pub fn detect_bounces(s: &[(f64, Vec3)], search: &BounceSearch) -> Vec<DetectedB
 
 fn bounce_at(s: &[(f64, Vec3)], i: usize, search: &BounceSearch) -> Option<DetectedBounce> {
     let t0 = s[i].0;
-    let in_window = |k: &usize| (s[*k].0 - t0).abs() <= search.side_window;
     let mut best: Option<(f64, DetectedBounce)> = None;
     // split = index of the first sample after the contact: i (lowest sample
-    // belongs to "before") + 1, or i (it belongs to "after").
+    // belongs to "before") + 1, or i (it belongs to "after"). Each side's
+    // window is measured from its sample next to the contact, so a dropped
+    // frame at the bounce does not starve one side.
     for split in [i + 1, i] {
+        if split == 0 || split >= s.len() || s[split].0 - s[split - 1].0 > search.max_contact_gap {
+            continue;
+        }
+        let (t_before, t_after) = (s[split - 1].0, s[split].0);
         let lo = split.saturating_sub(search.side_samples);
-        let before: Vec<usize> = (lo..split).filter(in_window).collect();
+        let before: Vec<usize> = (lo..split)
+            .filter(|&k| t_before - s[k].0 <= search.side_window)
+            .collect();
         let hi = (split + search.side_samples).min(s.len());
-        let after: Vec<usize> = (split..hi).filter(in_window).collect();
+        let after: Vec<usize> = (split..hi)
+            .filter(|&k| s[k].0 - t_after <= search.side_window)
+            .collect();
         if before.len() < search.min_side_samples || after.len() < search.min_side_samples {
             continue;
         }
