@@ -10,14 +10,21 @@
 //! - [`fit`]: spin from a trajectory — the paper's polynomial/Magnus fit with
 //!   its outlier filter, and a flight-model refinement — and prediction of
 //!   the bounce and the hitting point.
+//! - [`estimator`]: the streaming estimator (EKF, trajectory life cycle,
+//!   strike plan) the estimator thread owns.
+//! - [`plan`]: the strike plan it publishes.
+//! - [`eval`]: accuracy evaluations on simulated flights.
 //! - [`sim`]: a seeded ball launcher and tracker model that produce
 //!   realistic observations with ground truth.
 //! - [`wire`]: the datagram codecs (checked view over bytes, validated value).
 //! - [`calib`]: the calibration files in `calib/`.
+//! - [`data`]: real recorded trajectories (MPI launcher set), their frame,
+//!   and the real-data evaluation and calibration harness.
 //! - [`cli`]: the `topspin` command line.
 
 pub mod calib;
 pub mod cli;
+pub mod data;
 pub mod estimator;
 pub mod eval;
 pub mod fit;
