@@ -159,9 +159,11 @@ fn run_stream(a: EvalStreamArgs) -> anyhow::Result<()> {
         return Ok(());
     }
     println!(
-        "Streaming estimator, {} balls back to back ({} tracked), {} mm noise, {:.0}% dropouts, two false \
-         starts on every {}th ball; medians (p90 in brackets):\n",
+        "Streaming estimator, {} balls back to back ({} with the true hit inside the hitting window, {} of \
+         them tracked), {} mm noise, {:.0}% dropouts, two false starts on every {}th ball; medians (p90 in \
+         brackets):\n",
         report.balls,
+        report.reachable,
         report.tracked,
         setup.noise_mm,
         setup.dropout * 100.0,

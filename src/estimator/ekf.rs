@@ -37,7 +37,7 @@ pub struct EkfNoise {
 
 impl Default for EkfNoise {
     fn default() -> Self {
-        EkfNoise { measurement: 0.002, accel: 0.5, spin: 100.0, bounce_vel: 0.05, bounce_spin: 400.0 }
+        EkfNoise { measurement: 0.002, accel: 0.005, spin: 1.0, bounce_vel: 0.05, bounce_spin: 400.0 }
     }
 }
 

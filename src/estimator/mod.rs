@@ -61,6 +61,9 @@ pub struct EstimatorConfig {
     pub start_filter: StartFilter,
     /// Initial spin uncertainty of a new track, rad/s.
     pub initial_spin_std: f64,
+    /// Prior uncertainty of the spin along the flight direction, rad/s
+    /// (as [`crate::fit::refine::RefineConfig::prior_along_velocity`]).
+    pub spin_prior_along_velocity: f64,
 }
 
 impl Default for EstimatorConfig {
@@ -72,6 +75,7 @@ impl Default for EstimatorConfig {
             noise: EkfNoise::default(),
             start_filter: StartFilter::default(),
             initial_spin_std: 250.0,
+            spin_prior_along_velocity: crate::fit::refine::RefineConfig::default().prior_along_velocity,
         }
     }
 }
@@ -254,9 +258,25 @@ impl Estimator {
             .map(|m| m.spin_linear)
             .filter(|w| w.norm() < 1500.0)
             .unwrap_or_else(Vec3::zeros);
-        let state = crate::physics::BallState::new(cubic.pos(last.t), vel, spin);
+        // A trajectory cannot see the spin along the flight direction: start
+        // it at zero with the refined fit's prior (spin is imparted
+        // perpendicular to the exit velocity), the rest from the cubic.
+        let first = cubic.vel(inliers[0].t).normalize();
+        let spin = spin - first * first.dot(&spin);
+        // Start the filter at the first inlier and run it over all of them,
+        // so the early samples (the spin's lever arm) count fully.
+        let t_first = inliers[0].t;
+        let state = crate::physics::BallState::new(cubic.pos(t_first), cubic.vel(t_first), spin);
         let sigma = self.cfg.noise.measurement;
-        let ekf = Ekf::new(last.t, &state, 2.0 * sigma, 0.3, self.cfg.initial_spin_std, self.cfg.noise);
+        let mut ekf = Ekf::new(t_first, &state, 2.0 * sigma, 0.6, self.cfg.initial_spin_std, self.cfg.noise);
+        let along = first * first.transpose();
+        let spin_cov = (nalgebra::Matrix3::identity() - along) * self.cfg.initial_spin_std.powi(2)
+            + along * self.cfg.spin_prior_along_velocity.powi(2);
+        ekf.p.fixed_view_mut::<3, 3>(6, 6).copy_from(&spin_cov);
+        for s in &inliers {
+            ekf.predict(&self.prop, s.t);
+            ekf.update(&s.pos);
+        }
         let id = self.next_id;
         self.next_id = self.next_id.wrapping_add(1);
         let mut window = HVec::new();

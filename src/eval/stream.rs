@@ -50,7 +50,10 @@ pub struct LeadRow {
 pub struct StreamReport {
     pub setup: StreamSetup,
     pub balls: usize,
-    /// Balls the estimator tracked (got at least one plan).
+    /// Balls whose true hitting point lies inside the hitting window (the
+    /// others are rightly withheld and not scored).
+    pub reachable: usize,
+    /// Reachable balls the estimator made at least one plan for.
     pub tracked: usize,
     /// Errors of the latest plan made before the true net crossing.
     pub at_net: Vec<LeadRow>,
@@ -138,11 +141,21 @@ pub fn evaluate(cal: &Calibration, setup: &StreamSetup) -> StreamReport {
     let window = run_estimator(cal, EstimatorConfig { spin_source: SpinSource::WindowFit, ..base }, &balls, &launches);
     let paper = FitConfig::new(Method::Paper, cal.strike.hit_plane_x).with_noise(noise);
     let refined = FitConfig::new(Method::Refined, cal.strike.hit_plane_x).with_noise(noise);
-    let tracked = (0..balls.len()).filter(|k| ekf.iter().any(|(b, _)| b == k)).count();
+    let reachable: Vec<bool> = balls
+        .iter()
+        .map(|b| {
+            b.truth.hit.as_ref().is_some_and(|h| {
+                let s = &cal.strike;
+                (s.window_y[0]..=s.window_y[1]).contains(&h.pos[1])
+                    && (s.window_z[0]..=s.window_z[1]).contains(&h.pos[2])
+            })
+        })
+        .collect();
+    let tracked = (0..balls.len()).filter(|&k| reachable[k] && ekf.iter().any(|(b, _)| *b == k)).count();
 
     let at = |when: &dyn Fn(&SimBall) -> Option<f64>| -> [Vec<Option<(f64, f64)>>; 4] {
         let mut cols: [Vec<Option<(f64, f64)>>; 4] = Default::default();
-        for (k, ball) in balls.iter().enumerate() {
+        for (k, ball) in balls.iter().enumerate().filter(|(k, _)| reachable[*k]) {
             let t0 = launches[k];
             let Some(t_rel) = when(ball) else {
                 cols.iter_mut().for_each(|c| c.push(None));
@@ -164,5 +177,6 @@ pub fn evaluate(cal: &Calibration, setup: &StreamSetup) -> StreamReport {
     for lead in LEADS {
         by_lead.extend(rows(lead, at(&|b: &SimBall| b.truth.hit.as_ref().map(|h| h.t - lead))));
     }
-    StreamReport { setup: *setup, balls: balls.len(), tracked, at_net, by_lead }
+    let reachable = reachable.iter().filter(|r| **r).count();
+    StreamReport { setup: *setup, balls: balls.len(), reachable, tracked, at_net, by_lead }
 }
