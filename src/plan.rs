@@ -31,7 +31,8 @@ pub struct StrikePlan {
     pub velocity: Vec3,
     /// Bat orientation at the hit.
     pub orientation: EulerZyx,
-    /// The ball's spin used for the plan, rad/s.
+    /// The ball's spin in flight before its bounce (what the stroke
+    /// answers), rad/s.
     pub spin: Vec3,
     /// 0 (guess) … 1 (certain).
     pub confidence: f64,

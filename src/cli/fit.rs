@@ -50,6 +50,10 @@ pub struct FitArgs {
     /// The tracker's per-axis noise in mm (sets the outlier thresholds).
     #[arg(long, default_value_t = 2.0, value_name = "MM")]
     pub noise_mm: f64,
+    /// FILE is a recording of many balls (e.g. `topspin sim`'s stream.csv):
+    /// run the streaming estimator over it and print one plan per ball.
+    #[arg(long)]
+    pub stream: bool,
 }
 
 /// Reads a `t,x,y,z` CSV (extra columns ignored).
@@ -111,6 +115,9 @@ pub fn run(args: FitArgs) -> anyhow::Result<()> {
         return Err(BadInput("--noise-mm must be positive".into()).into());
     }
     let samples = read_samples(&args.file)?;
+    if args.stream {
+        return super::replay_stream::run(&samples, &cal, hit_plane_x, args.noise_mm * 1e-3, args.json);
+    }
     let method = match args.method {
         MethodChoice::Paper => Method::Paper,
         MethodChoice::Refined => Method::Refined,

@@ -6,6 +6,7 @@ use clap::{Parser, Subcommand};
 
 pub mod eval;
 pub mod fit;
+pub mod replay_stream;
 pub mod sim;
 
 /// Exit code for unusable input (files, configuration, arguments).

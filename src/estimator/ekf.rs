@@ -17,6 +17,9 @@ use crate::physics::{BallState, Event, Propagator, StopAt, Vec3};
 pub type M9 = SMatrix<f64, 9, 9>;
 pub type V9 = SVector<f64, 9>;
 
+/// Longest step of the covariance propagation, s.
+pub const COV_STEP: f64 = 0.01;
+
 /// χ² (3 dof) at 99.9 %: observations farther than this are rejected.
 pub const GATE_CHI2: f64 = 16.27;
 
@@ -154,8 +157,9 @@ impl Ekf {
             let mut now = self.t;
             let event = prop.advance(&mut s, &mut now, &StopAt::time(t));
             let dt = now - self.t;
-            // Covariance over the flight part, in steps of the propagator's dt.
-            let steps = (dt / prop.dt).ceil().max(1.0) as usize;
+            // Covariance over the flight part, in steps of at most COV_STEP
+            // (the transition is second order in F·dt, and ‖F‖·COV_STEP ≈ 0.01).
+            let steps = (dt / COV_STEP).ceil().max(1.0) as usize;
             let mut cov_state = *self;
             for _ in 0..steps {
                 let h = dt / steps as f64;

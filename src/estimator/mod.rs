@@ -157,7 +157,9 @@ struct Track {
     last_t: f64,
     rejects: HVec<Sample, MAX_CONSECUTIVE_REJECTS>,
     window: HVec<Sample, WINDOW_CAP>,
-    bounced: bool,
+    /// The spin the ball flew with before its bounce (the Magnus spin the
+    /// stroke answers, as in the paper); `None` before the bounce.
+    spin_before_bounce: Option<Vec3>,
 }
 
 /// The estimator: at most one ball tracked at a time (the one coming at
@@ -283,7 +285,7 @@ impl Estimator {
         for s in &inliers {
             let _ = window.push(*s);
         }
-        self.track = Some(Track { id, ekf, last_t: last.t, rejects: HVec::new(), window, bounced: false });
+        self.track = Some(Track { id, ekf, last_t: last.t, rejects: HVec::new(), window, spin_before_bounce: None });
         out.push(EstimatorEvent::Started { trajectory: id, t: last.t, start_outliers: outliers.len() as u8 });
         self.plan(last.t, out);
     }
@@ -299,7 +301,7 @@ impl Estimator {
             // Only a tentative bounce until the observation is accepted.
             if let Update::Accepted { .. } = trial.update(&sample.pos) {
                 out.push(EstimatorEvent::Bounce { trajectory: track.id, t: tb });
-                track.bounced = true;
+                track.spin_before_bounce.get_or_insert(track.ekf.state().spin);
             }
             trial = track.ekf;
             trial.predict(&self.prop, sample.t);
@@ -309,7 +311,7 @@ impl Estimator {
                 track.ekf = trial;
                 track.last_t = sample.t;
                 track.rejects.clear();
-                if !track.bounced {
+                if track.spin_before_bounce.is_none() {
                     let _ = track.window.push(sample);
                     if cfg.spin_source == SpinSource::WindowFit {
                         refit_spin(track, &self.prop);
@@ -371,8 +373,8 @@ impl Estimator {
             out.push(EstimatorEvent::Withheld { trajectory: track.id, t, reason });
             return;
         }
-        // The spin the ball arrives with decides the stroke.
-        let spin = hit.state.spin;
+        // The spin the ball flew with (before its bounce) decides the stroke.
+        let spin = track.spin_before_bounce.unwrap_or(state.spin);
         self.plan_seq = self.plan_seq.wrapping_add(1);
         let tau = hit.t - t;
         let p = &track.ekf.p;
@@ -389,7 +391,7 @@ impl Estimator {
             position: hit.state.pos,
             velocity: stroke::bat_velocity(&self.strike),
             orientation: stroke::bat_orientation(&self.strike, &spin, hit.state.pos.y),
-            spin: state.spin,
+            spin,
             confidence,
         });
     }

@@ -1,0 +1,66 @@
+//! Benchmark of `estimator`: the cost of one observation (EKF predict and
+//! update, window refit, prediction through the bounce, stroke) on a
+//! simulated stream of balls back to back. DESIGN §9 budget: p99 < 50 µs.
+//! Criterion reports the mean per observation; a second pass times every
+//! observation on its own and prints p50 / p99 / p99.9 / max.
+
+use std::hint::black_box;
+use std::time::Instant as WallClock;
+
+use criterion::{Criterion, criterion_group, criterion_main};
+use topspin::calib::Calibration;
+use topspin::estimator::{Estimator, EstimatorConfig};
+use topspin::eval::stream::{StreamSetup, simulate_stream};
+use topspin::physics::Vec3;
+use topspin::time::Instant;
+
+fn observations() -> Vec<(Instant, Vec3)> {
+    let cal = Calibration::default_cell();
+    let (balls, launches) = simulate_stream(&cal, &StreamSetup { balls: 45, ..StreamSetup::default() });
+    balls
+        .iter()
+        .zip(&launches)
+        .flat_map(|(b, &t0)| b.observations.iter().map(move |o| (Instant::from_secs_f64(t0 + o.t), o.pos)))
+        .collect()
+}
+
+fn percentiles(obs: &[(Instant, Vec3)]) {
+    let cal = Calibration::default_cell();
+    let mut ns = Vec::with_capacity(obs.len() * 5);
+    for _ in 0..5 {
+        let mut est = Estimator::new(&cal, EstimatorConfig::default());
+        for &(t, p) in obs {
+            let start = WallClock::now();
+            black_box(est.observe(t, p));
+            ns.push(start.elapsed().as_nanos() as f64);
+        }
+    }
+    ns.sort_by(f64::total_cmp);
+    let q = |p: f64| ns[((ns.len() - 1) as f64 * p) as usize] / 1e3;
+    println!(
+        "estimator/observe per observation ({} samples): p50 {:.1} µs  p99 {:.1} µs  p99.9 {:.1} µs  max {:.1} µs",
+        ns.len(),
+        q(0.5),
+        q(0.99),
+        q(0.999),
+        ns[ns.len() - 1] / 1e3
+    );
+}
+
+fn benches(c: &mut Criterion) {
+    let obs = observations();
+    let cal = Calibration::default_cell();
+    percentiles(&obs);
+    c.bench_function("estimator/observe_stream_of_45_balls", |b| {
+        b.iter(|| {
+            let mut est = Estimator::new(&cal, EstimatorConfig::default());
+            for &(t, p) in &obs {
+                black_box(est.observe(t, p));
+            }
+        })
+    });
+    println!("({} observations per iteration)", obs.len());
+}
+
+criterion_group!(estimator, benches);
+criterion_main!(estimator);
