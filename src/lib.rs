@@ -28,6 +28,7 @@ pub mod data;
 pub mod estimator;
 pub mod eval;
 pub mod fit;
+pub mod ingest;
 pub mod physics;
 pub mod plan;
 pub mod sim;
