@@ -19,8 +19,10 @@
 pub mod calib;
 pub mod cli;
 pub mod fit;
+pub mod motion;
 pub mod physics;
 pub mod plan;
+pub mod rsi;
 pub mod sim;
 pub mod time;
 pub mod wire;
