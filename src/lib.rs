@@ -19,10 +19,12 @@
 pub mod calib;
 pub mod cli;
 pub mod fit;
+pub mod mock_krc;
 pub mod motion;
 pub mod physics;
 pub mod plan;
 pub mod rsi;
+pub mod runtime;
 pub mod sim;
 pub mod time;
 pub mod wire;

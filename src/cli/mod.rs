@@ -6,6 +6,7 @@ use clap::{Parser, Subcommand};
 
 pub mod eval;
 pub mod fit;
+pub mod mock_krc;
 pub mod sim;
 
 /// Exit code for unusable input (files, configuration, arguments).
@@ -37,6 +38,8 @@ pub enum Command {
     /// Offline evaluations: accuracy tables on simulated and real flights.
     #[command(subcommand)]
     Eval(eval::EvalCommand),
+    /// The mock KR C4: an RSI client sending <Rob> every 4 ms (12 ms).
+    MockKrc(mock_krc::MockKrcArgs),
 }
 
 /// Runs the command line; returns the process exit code.
@@ -46,6 +49,7 @@ pub fn main() -> i32 {
         Command::Sim(a) => sim::run(a),
         Command::Fit(a) => fit::run(a),
         Command::Eval(c) => eval::run(c),
+        Command::MockKrc(a) => mock_krc::run(a),
     };
     match result {
         Ok(()) => 0,

@@ -5,4 +5,6 @@
 //! - [`codec`]: `<Rob>` and `<Sen>` parse/emit in KUKA units.
 
 pub mod codec;
+pub mod server;
+pub mod session;
 pub mod xml;
