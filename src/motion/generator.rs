@@ -38,6 +38,15 @@ pub const MAX_OUTSIDE_M: f64 = 0.10;
 /// Extra room kept between a hit with velocity and the box walls, m.
 pub const WALL_MARGIN_M: f64 = 0.01;
 
+/// Arrival this much after the hitting time counts as on time, s.
+pub const LATE_TOLERANCE_S: f64 = 0.0005;
+/// A refinement closer than this to the current target (per axis, m; and
+/// in time, s) that would arrive late is not taken.
+pub const KEEP_MAX_DP_M: f64 = 0.002;
+pub const KEEP_MAX_DT_S: f64 = 0.001;
+/// Duration nudges tried when Ruckig misses the hitting time, s.
+const RETRY_NUDGES_S: [f64; 4] = [-0.0003, 0.0003, -0.0007, 0.0007];
+
 /// What the generator is doing.
 #[derive(Copy, Clone, Debug, PartialEq, Eq)]
 pub enum Phase {
@@ -91,6 +100,7 @@ pub struct StrokeGenerator {
     otg: Otg,
     input: InputParameter<6>,
     traj: Trajectory<6>,
+    spare: Trajectory<6>,
     /// Start of `traj`, s (the `Instant` domain).
     t0: f64,
     phase: Phase,
@@ -105,6 +115,8 @@ pub struct StrokeGenerator {
     pub calculations: u64,
     /// Ruckig calculations that failed.
     pub failures: u64,
+    /// Refinements not taken because they would arrive late.
+    pub kept: u64,
 }
 
 fn secs(t: Instant) -> f64 {
@@ -123,6 +135,7 @@ impl StrokeGenerator {
         let mut g = StrokeGenerator {
             otg: Ruckig::new(None, lim.dt),
             traj: Trajectory::new(None),
+            spare: Trajectory::new(None),
             input,
             lim,
             t0: 0.0,
@@ -135,6 +148,7 @@ impl StrokeGenerator {
             late_by: 0.0,
             calculations: 0,
             failures: 0,
+            kept: 0,
         };
         g.reset(now, start);
         g
@@ -261,10 +275,40 @@ impl StrokeGenerator {
         }
         let target = self.target_of(plan)?;
         let duration = target.hit_time - self.t_last;
+        // Keep the current stroke aside: a refinement that can no longer be
+        // met on time (the axes are already in their final, limit-bound
+        // acceleration) but differs only a little is not worth arriving late.
+        std::mem::swap(&mut self.traj, &mut self.spare);
+        let (old_t0, old_target, old_phase) = (self.t0, self.target, self.phase);
         if !self.calculate(&target.pose, &target.velocity, Some(duration)) {
+            std::mem::swap(&mut self.traj, &mut self.spare);
+            self.t0 = old_t0;
             return Err(PlanRejected::NoTrajectory);
         }
-        self.late_by = (self.traj.get_duration() - duration).max(0.0);
+        // Ruckig's time-synchronisation step sometimes finds no profile for
+        // exactly this duration (numerically, not physically) and returns
+        // the end of a later interval. Nudging the duration by a fraction of
+        // a millisecond finds a profile in nearly all those cases.
+        for nudge in RETRY_NUDGES_S {
+            if self.traj.get_duration() - duration <= LATE_TOLERANCE_S {
+                break;
+            }
+            self.calculate(&target.pose, &target.velocity, Some(duration + nudge));
+        }
+        let late_by = (self.traj.get_duration() - duration).max(0.0);
+        if late_by > LATE_TOLERANCE_S
+            && old_phase == Phase::Approach
+            && let Some(old) = old_target
+            && old.hit_time > self.t_last
+            && (old.hit_time - target.hit_time).abs() <= KEEP_MAX_DT_S
+            && (0..3).all(|i| (old.pose[i] - target.pose[i]).abs() <= KEEP_MAX_DP_M)
+        {
+            std::mem::swap(&mut self.traj, &mut self.spare);
+            self.t0 = old_t0;
+            self.kept += 1;
+            return Ok(self.target.as_ref().expect("old target"));
+        }
+        self.late_by = late_by;
         self.phase = Phase::Approach;
         self.target = Some(target);
         Ok(self.target.as_ref().expect("just set"))
@@ -373,6 +417,19 @@ impl StrokeGenerator {
             self.input.target_position[i] = pos[i];
             self.input.target_velocity[i] = vel[i];
             self.input.target_acceleration[i] = 0.0;
+            // An axis already resting at its target is left out: Ruckig's
+            // time synchronisation can fail on such (numerically) empty
+            // moves and return a later duration for all axes.
+            let resting = (pos[i] - self.p[i]).abs() < 1e-7
+                && self.v[i].abs() < 1e-7
+                && self.a[i].abs() < 1e-6
+                && vel[i] == 0.0;
+            self.input.enabled[i] = !resting;
+            if resting {
+                self.input.current_position[i] = pos[i];
+                self.input.current_velocity[i] = 0.0;
+                self.input.current_acceleration[i] = 0.0;
+            }
         }
         self.input.minimum_duration = min_duration;
         self.calculations += 1;
