@@ -56,7 +56,7 @@ fn the_cycle_path_does_not_allocate() {
         }
         .emit(&all, 4, &mut req)
         .unwrap();
-        if k % 2 == 0 {
+        if k.is_multiple_of(2) {
             s.set_plan(plan(k as u32, now));
         }
         s.handle_datagram(now, &req[..n], &mut out).unwrap();

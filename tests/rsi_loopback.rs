@@ -11,6 +11,8 @@
 //! the 4 ms budget itself is measured by the benches.
 //! `TOPSPIN_LOOPBACK_CYCLES` shortens the run while debugging.
 
+#![allow(clippy::needless_range_loop)] // parallel per-axis arrays
+
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 

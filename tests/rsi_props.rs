@@ -1,6 +1,8 @@
 //! Property tests: codec round trip and panic-freedom, the safety limits
 //! under hostile plans, and a session that never crashes on bad bytes.
 
+#![allow(clippy::needless_range_loop)] // parallel per-axis arrays
+
 use proptest::prelude::*;
 use topspin::calib::Calibration;
 use topspin::motion::MotionLimits;
@@ -111,7 +113,7 @@ proptest! {
         let mut plans = plans.into_iter();
         for k in 0..400u64 {
             let now = Instant(1_000_000_000 + k * 4_000_000);
-            if k % 25 == 0
+            if k.is_multiple_of(25)
                 && let Some((x, y, z, vx, vy, vz, b, dt_hit, _)) = plans.next()
             {
                 let hit = (now.as_secs_f64() + dt_hit).max(0.0);

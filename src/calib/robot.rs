@@ -6,6 +6,8 @@
 //! the conversions to radians. It does not generate motion (`motion`) or
 //! speak RSI (`rsi`).
 
+#![allow(clippy::needless_range_loop)] // parallel per-axis arrays
+
 use serde::{Deserialize, Serialize};
 
 use crate::physics::Vec3;

@@ -29,6 +29,7 @@ pub struct Cli {
 }
 
 #[derive(Debug, Subcommand)]
+#[allow(clippy::large_enum_variant)] // parsed once at start-up
 pub enum Command {
     /// Simulate launcher balls seen by the tracker: CSV + ground truth, or a
     /// live UDP stream.

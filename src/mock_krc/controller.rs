@@ -8,6 +8,8 @@
 //! the commanded pose within its own per-axis velocity and acceleration
 //! limits. A late cycle keeps the last correction (HOLDON).
 
+#![allow(clippy::needless_range_loop)] // parallel per-axis arrays
+
 use crate::rsi::codec::{CodecError, KukaPose, RobElement, RobFrame, SenFrame};
 use crate::time::Instant;
 

@@ -24,6 +24,8 @@
 //! outside is pulled in (with room to brake from the bat velocity), the bat
 //! speed and orientation are clamped to the cell's limits.
 
+#![allow(clippy::needless_range_loop)] // parallel per-axis arrays
+
 use rsruckig::prelude::*;
 
 use super::limits::GENERATOR_LIMIT_FRACTION;

@@ -1,6 +1,8 @@
 //! The cell's motion limits in generator units (m, rad, s) and the
 //! conversion of a plan from the table frame T to the robot's BASE B.
 
+#![allow(clippy::needless_range_loop)] // parallel per-axis arrays
+
 use crate::calib::RobotFile;
 use crate::physics::Vec3;
 use crate::plan::EulerZyx;

@@ -9,6 +9,8 @@
 //! three hold on every cycle. Non-finite requests are treated as "stop".
 //! No allocation, no panics.
 
+#![allow(clippy::needless_range_loop)] // parallel per-axis arrays
+
 use super::{MotionLimits, Pose6};
 
 /// The filter's state: the last pose sent and its per-cycle velocity.

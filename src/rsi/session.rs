@@ -21,6 +21,8 @@
 //! (arrival − IPOC) over a sliding window, so arrival jitter does not shake
 //! the path. Only #ABSOLUTE mode is produced.
 
+#![allow(clippy::needless_range_loop)] // parallel per-axis arrays
+
 use heapless::Deque;
 
 use super::codec::{CodecError, KukaPose, RobFrame, SenFrame, check_text};
