@@ -1,5 +1,4 @@
-//! Calibration: the files in `calib/` (table, physics, strike; the robot
-//! cell joins them later). The repository's `calib/` is compiled in as the
+//! Calibration: the files in `calib/` (table, physics, strike, robot). The repository's `calib/` is compiled in as the
 //! default; `--calib DIR` loads another folder with the same file names,
 //! where each missing file falls back to the compiled default.
 
@@ -9,10 +8,14 @@ use serde::{Deserialize, Serialize};
 
 use crate::physics::{PhysicsParams, Propagator, Table};
 
+pub mod robot;
+pub use robot::RobotFile;
+
 /// The compiled-in defaults (the repository's `calib/` folder).
 const DEFAULT_PHYSICS: &str = include_str!("../../calib/physics.toml");
 const DEFAULT_TABLE: &str = include_str!("../../calib/table.toml");
 const DEFAULT_STRIKE: &str = include_str!("../../calib/strike.toml");
+const DEFAULT_ROBOT: &str = include_str!("../../calib/robot.toml");
 
 /// `calib/physics.toml`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -72,6 +75,8 @@ pub struct Calibration {
     pub physics: PhysicsParams,
     pub table: Table,
     pub strike: StrikeCalib,
+    /// The robot cell (`calib/robot.toml`).
+    pub robot: RobotFile,
 }
 
 /// A calibration file that cannot be used.
@@ -165,7 +170,19 @@ impl Calibration {
                 return Err(CalibError::OutOfRange { path, key, value });
             }
         }
-        Ok(Calibration { physics, table, strike })
+        let (text, path) = read_or_default(dir, "robot.toml", DEFAULT_ROBOT)?;
+        let robot = parse::<RobotFile>(&text, &path)?;
+        robot.validate().map_err(|b| CalibError::OutOfRange { path: path.clone(), key: b.key, value: b.value })?;
+        // The hitting plane must cross the robot's workspace.
+        let x_b = robot.t_to_b(crate::physics::Vec3::new(strike.hit_plane_x, 0.0, 0.0)).x;
+        if !(robot.workspace.min_xyz_m[0]..=robot.workspace.max_xyz_m[0]).contains(&x_b) {
+            return Err(CalibError::OutOfRange {
+                path,
+                key: "strike.hit_plane_x (outside robot workspace)",
+                value: strike.hit_plane_x,
+            });
+        }
+        Ok(Calibration { physics, table, strike, robot })
     }
 
     /// The same cell with the paper's constant physics coefficients.

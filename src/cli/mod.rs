@@ -6,6 +6,7 @@ use clap::{Parser, Subcommand};
 
 pub mod eval;
 pub mod fit;
+pub mod mock_krc;
 pub mod replay_stream;
 pub mod sim;
 
@@ -25,6 +26,7 @@ pub struct Cli {
 }
 
 #[derive(Debug, Subcommand)]
+#[allow(clippy::large_enum_variant)] // parsed once at start-up
 pub enum Command {
     /// Simulate launcher balls seen by the tracker: CSV + ground truth, or a
     /// live UDP stream.
@@ -34,6 +36,8 @@ pub enum Command {
     /// Offline evaluations: accuracy tables on simulated and real flights.
     #[command(subcommand)]
     Eval(eval::EvalCommand),
+    /// The mock KR C4: an RSI client sending <Rob> every 4 ms (12 ms).
+    MockKrc(mock_krc::MockKrcArgs),
 }
 
 /// Runs the command line; returns the process exit code.
@@ -43,6 +47,7 @@ pub fn main() -> i32 {
         Command::Sim(a) => sim::run(a),
         Command::Fit(a) => fit::run(a),
         Command::Eval(c) => eval::run(c),
+        Command::MockKrc(a) => mock_krc::run(a),
     };
     match result {
         Ok(()) => 0,

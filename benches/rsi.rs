@@ -1,0 +1,78 @@
+//! RSI per-cycle cost: parse + plan + emit (DESIGN §9: answer p99.9 < 100 µs).
+
+use criterion::{Criterion, criterion_group, criterion_main};
+use std::hint::black_box;
+use topspin::calib::Calibration;
+use topspin::physics::Vec3;
+use topspin::plan::{EulerZyx, StrikePlan};
+use topspin::rsi::codec::{KukaPose, RobElement, RobFrame, SenFrame};
+use topspin::rsi::session::{MAX_ANSWER_LEN, RsiSession, SessionConfig};
+use topspin::time::Instant;
+
+fn request(ipoc: u64, buf: &mut [u8]) -> usize {
+    let home = KukaPose::from_array([350.0, 0.0, 450.0, 180.0, 0.0, 0.0]);
+    let all = [RobElement::RIst, RobElement::RSol, RobElement::AIPos, RobElement::ASPos, RobElement::Delay];
+    RobFrame { ipoc, rist: Some(home), rsol: Some(home), aipos: Some([0.0; 6]), aspos: Some([0.0; 6]), delay: Some(0) }
+        .emit(&all, 4, buf)
+        .unwrap()
+}
+
+fn bench(c: &mut Criterion) {
+    let mut req = [0u8; 1024];
+    let n = request(4208831, &mut req);
+    let mut out = [0u8; MAX_ANSWER_LEN];
+    c.bench_function("rsi/parse_rob", |b| b.iter(|| RobFrame::parse(black_box(&req[..n])).unwrap()));
+    c.bench_function("rsi/emit_sen", |b| {
+        b.iter(|| {
+            SenFrame {
+                sentype: "ImFree",
+                estr: None,
+                rkorr: Some(KukaPose::from_array([12.3, -3.2, 40.0, 0.0, 28.0, 0.0])),
+                ipoc: 4208831,
+            }
+            .emit(4, black_box(&mut out))
+            .unwrap()
+        })
+    });
+    let cal = Calibration::default_cell();
+    let mk = || RsiSession::new(SessionConfig::from_calibration(&cal, "ImFree")).unwrap();
+    let plan = |seq: u32, now: Instant, hit: Instant| StrikePlan {
+        seq,
+        trajectory: 1,
+        made_at: now,
+        hit_time: hit,
+        position: Vec3::new(1.6, 0.2 + (seq % 7) as f64 * 1e-3, 0.3),
+        velocity: Vec3::new(-1.0, 0.0, 0.1),
+        orientation: EulerZyx { a: 0.1, b: 0.3, c: 0.0 },
+        spin: Vec3::zeros(),
+        confidence: 1.0,
+    };
+    // Cycle without a new plan (sampling the stroke).
+    let mut s = mk();
+    let mut k = 0u64;
+    c.bench_function("rsi/cycle_sample", |b| {
+        b.iter(|| {
+            k += 1;
+            let now = Instant(1_000_000_000 + k * 4_000_000);
+            let n = request(100 + 4 * k, &mut req);
+            s.handle_datagram(now, &req[..n], &mut out).unwrap()
+        })
+    });
+    // Cycle with a new plan every cycle (Ruckig re-plan each time); a new
+    // stroke every 100 cycles so the hit stays ahead.
+    let mut s = mk();
+    let mut k = 0u64;
+    c.bench_function("rsi/cycle_replan", |b| {
+        b.iter(|| {
+            k += 1;
+            let now = Instant(1_000_000_000 + k * 4_000_000);
+            let hit = Instant(1_000_000_000 + ((k / 100) * 100 + 150) * 4_000_000);
+            s.set_plan(plan(k as u32, now, hit));
+            let n = request(100 + 4 * k, &mut req);
+            s.handle_datagram(now, &req[..n], &mut out).unwrap()
+        })
+    });
+}
+
+criterion_group!(benches, bench);
+criterion_main!(benches);

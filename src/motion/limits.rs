@@ -1,0 +1,140 @@
+//! The cell's motion limits in generator units (m, rad, s) and the
+//! conversion of a plan from the table frame T to the robot's BASE B.
+
+#![allow(clippy::needless_range_loop)] // parallel per-axis arrays
+
+use crate::calib::RobotFile;
+use crate::physics::Vec3;
+use crate::plan::EulerZyx;
+
+use super::Pose6;
+
+/// Fraction of the cell's limits the generator plans with; the safety
+/// filter enforces the full limits, so a well-behaved stroke never touches
+/// them.
+pub const GENERATOR_LIMIT_FRACTION: f64 = 0.95;
+
+/// Everything motion needs to know about the cell, in SI.
+#[derive(Clone, Debug, PartialEq)]
+pub struct MotionLimits {
+    /// Sensor cycle, s.
+    pub dt: f64,
+    /// Lower corner of the workspace (orientation: home − range).
+    pub lo: Pose6,
+    /// Upper corner of the workspace (orientation: home + range).
+    pub hi: Pose6,
+    pub vmax: Pose6,
+    pub amax: Pose6,
+    pub jmax: Pose6,
+    /// Home = RSI start pose.
+    pub home: Pose6,
+    /// The fastest bat speed a plan may ask for, m/s.
+    pub max_bat_speed: f64,
+    /// Follow-through time after the hit, s.
+    pub follow_through: f64,
+    /// Base yaw in T, rad, and base origin in T, m.
+    pub base_yaw: f64,
+    pub base_xyz: [f64; 3],
+}
+
+impl MotionLimits {
+    /// From a validated `robot.toml`.
+    pub fn from_robot(r: &RobotFile) -> Self {
+        let rad = |d: [f64; 3]| d.map(f64::to_radians);
+        let home_abc = rad(r.home.abc_deg);
+        let range = rad(r.workspace.abc_range_deg);
+        let cat = |a: [f64; 3], b: [f64; 3]| [a[0], a[1], a[2], b[0], b[1], b[2]];
+        let l = &r.limits;
+        MotionLimits {
+            dt: r.cycle_s(),
+            lo: cat(r.workspace.min_xyz_m, [0, 1, 2].map(|i| home_abc[i] - range[i])),
+            hi: cat(r.workspace.max_xyz_m, [0, 1, 2].map(|i| home_abc[i] + range[i])),
+            vmax: cat(l.velocity_m_s, rad(l.rot_velocity_deg_s)),
+            amax: cat(l.acceleration_m_s2, rad(l.rot_acceleration_deg_s2)),
+            jmax: cat(l.jerk_m_s3, rad(l.rot_jerk_deg_s3)),
+            home: cat(r.home.xyz_m, home_abc),
+            max_bat_speed: l.max_bat_speed_m_s,
+            follow_through: r.rsi.follow_through_s,
+            base_yaw: r.base_yaw(),
+            base_xyz: r.cell.base_in_table_xyz_m,
+        }
+    }
+
+    /// A point from T to B.
+    pub fn point_t_to_b(&self, p: Vec3) -> Vec3 {
+        self.rotate_t_to_b(p - Vec3::from(self.base_xyz))
+    }
+
+    /// A direction from T to B.
+    pub fn rotate_t_to_b(&self, v: Vec3) -> Vec3 {
+        let (s, c) = self.base_yaw.sin_cos();
+        Vec3::new(c * v.x + s * v.y, -s * v.x + c * v.y, v.z)
+    }
+
+    /// A bat orientation (Euler ZYX in T) as KUKA A/B/C in B, each angle
+    /// unwrapped to lie within π of home.
+    pub fn orientation_t_to_b(&self, o: EulerZyx) -> [f64; 3] {
+        let r_t = rot_zyx(o.a, o.b, o.c);
+        let r_bt = rot_zyx(-self.base_yaw, 0.0, 0.0);
+        let r = mat_mul(&r_bt, &r_t);
+        let (a, b, c) = zyx_of(&r);
+        [unwrap_near(a, self.home[3]), unwrap_near(b, self.home[4]), unwrap_near(c, self.home[5])]
+    }
+}
+
+type Mat3 = [[f64; 3]; 3];
+
+/// Rz(a)·Ry(b)·Rx(c).
+pub fn rot_zyx(a: f64, b: f64, c: f64) -> Mat3 {
+    let (sa, ca) = a.sin_cos();
+    let (sb, cb) = b.sin_cos();
+    let (sc, cc) = c.sin_cos();
+    [
+        [ca * cb, ca * sb * sc - sa * cc, ca * sb * cc + sa * sc],
+        [sa * cb, sa * sb * sc + ca * cc, sa * sb * cc - ca * sc],
+        [-sb, cb * sc, cb * cc],
+    ]
+}
+
+fn mat_mul(x: &Mat3, y: &Mat3) -> Mat3 {
+    let mut r = [[0.0; 3]; 3];
+    for (i, row) in r.iter_mut().enumerate() {
+        for (j, v) in row.iter_mut().enumerate() {
+            *v = (0..3).map(|k| x[i][k] * y[k][j]).sum();
+        }
+    }
+    r
+}
+
+/// Euler ZYX (a, b, c) of a rotation matrix.
+pub fn zyx_of(r: &Mat3) -> (f64, f64, f64) {
+    let b = (-r[2][0]).clamp(-1.0, 1.0).asin();
+    let a = r[1][0].atan2(r[0][0]);
+    let c = r[2][1].atan2(r[2][2]);
+    (a, b, c)
+}
+
+/// `x` plus a multiple of 2π, within π of `reference`.
+pub fn unwrap_near(x: f64, reference: f64) -> f64 {
+    let tau = std::f64::consts::TAU;
+    x - ((x - reference) / tau).round() * tau
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::calib::Calibration;
+
+    #[test]
+    fn neutral_bat_in_t_is_home_orientation_in_b() {
+        let lim = MotionLimits::from_robot(&Calibration::default_cell().robot);
+        let abc = lim.orientation_t_to_b(EulerZyx::default());
+        for i in 0..3 {
+            assert!((abc[i] - lim.home[3 + i]).abs() < 1e-9, "{abc:?}");
+        }
+        let p = lim.point_t_to_b(Vec3::new(1.70, 0.0, 0.40));
+        assert!((p - Vec3::new(0.35, 0.0, 0.45)).norm() < 1e-12);
+        let (a, b, c) = zyx_of(&rot_zyx(0.3, -0.2, 0.1));
+        assert!((a - 0.3).abs() + (b + 0.2).abs() + (c - 0.1).abs() < 1e-12);
+    }
+}

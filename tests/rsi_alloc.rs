@@ -1,0 +1,65 @@
+//! The per-cycle path (parse, plan, generate, filter, emit) allocates
+//! nothing after construction: a counting allocator proves it.
+
+use std::alloc::System;
+
+use stats_alloc::{INSTRUMENTED_SYSTEM, Region, StatsAlloc};
+use topspin::calib::Calibration;
+use topspin::physics::Vec3;
+use topspin::plan::{EulerZyx, StrikePlan};
+use topspin::rsi::codec::{KukaPose, RobElement, RobFrame};
+use topspin::rsi::session::{MAX_ANSWER_LEN, RsiSession, SessionConfig};
+use topspin::time::Instant;
+
+#[global_allocator]
+static GLOBAL: &StatsAlloc<System> = &INSTRUMENTED_SYSTEM;
+
+#[test]
+fn the_cycle_path_does_not_allocate() {
+    let cal = Calibration::default_cell();
+    let mut s = RsiSession::new(SessionConfig::from_calibration(&cal, "ImFree")).unwrap();
+    let mut req = [0u8; 1024];
+    let mut out = [0u8; MAX_ANSWER_LEN];
+    let all = [RobElement::RIst, RobElement::RSol, RobElement::AIPos, RobElement::ASPos, RobElement::Delay];
+    let home = KukaPose::from_array([350.0, 0.0, 450.0, 180.0, 0.0, 0.0]);
+    let plan = |seq: u32, now: Instant| StrikePlan {
+        seq,
+        trajectory: 1,
+        made_at: now,
+        hit_time: Instant(1_500_000_000),
+        position: Vec3::new(1.6, 0.2 + seq as f64 * 1e-4, 0.3),
+        velocity: Vec3::new(-1.0, 0.0, 0.1),
+        orientation: EulerZyx { a: 0.1, b: 0.3, c: 0.0 },
+        spin: Vec3::zeros(),
+        confidence: 1.0,
+    };
+    // Warm up: first request, one plan (Ruckig sizes its buffers once).
+    let mut cycle = |k: u64, s: &mut RsiSession| {
+        let now = Instant(1_000_000_000 + k * 4_000_000);
+        let n = RobFrame {
+            ipoc: 100 + 4 * k,
+            rist: Some(home),
+            rsol: Some(home),
+            aipos: Some([0.0; 6]),
+            aspos: Some([0.0; 6]),
+            delay: Some(0),
+        }
+        .emit(&all, 4, &mut req)
+        .unwrap();
+        if k.is_multiple_of(2) {
+            s.set_plan(plan(k as u32, now));
+        }
+        s.handle_datagram(now, &req[..n], &mut out).unwrap();
+        while s.poll_event().is_some() {}
+    };
+    for k in 0..5 {
+        cycle(k, &mut s);
+    }
+    let region = Region::new(GLOBAL);
+    for k in 5..400 {
+        cycle(k, &mut s);
+    }
+    let stats = region.change();
+    assert_eq!(stats.allocations, 0, "{stats:?}");
+    assert_eq!(stats.reallocations, 0, "{stats:?}");
+}

@@ -1,0 +1,203 @@
+//! The mock KR C4 against the RSI session on loopback, 10 000 cycles (40 s)
+//! with a stream of strike plans: every answer on time, IPOC echoed, the
+//! TCP path within every limit, the bat at the hitting pose at the hitting
+//! time within 2 mm and 2 ms.
+//!
+//! "On time" is judged by the mock, as the controller would. Its deadline
+//! is one cycle on the robot; here it is stretched to 20 ms by default
+//! (`TOPSPIN_TEST_DEADLINE_MS`), because on a loaded shared 2-core machine
+//! a preempted thread misses 4 ms now and then — measured: a few per 1 500
+//! cycles at load average 4. The answers later than one cycle are printed;
+//! the 4 ms budget itself is measured by the benches.
+//! `TOPSPIN_LOOPBACK_CYCLES` shortens the run while debugging.
+
+#![allow(clippy::needless_range_loop)] // parallel per-axis arrays
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use topspin::calib::Calibration;
+use topspin::mock_krc::{self, MockKrcConfig};
+use topspin::motion::MotionLimits;
+use topspin::physics::Vec3;
+use topspin::plan::{EulerZyx, StrikePlan};
+use topspin::rsi::server::{PlanSlot, RsiServer, WaitStrategy};
+use topspin::rsi::session::{RsiSession, SessionConfig};
+use topspin::runtime;
+use topspin::time::{Duration, Instant};
+
+fn env_u64(name: &str, default: u64) -> u64 {
+    std::env::var(name).ok().and_then(|s| s.parse().ok()).unwrap_or(default)
+}
+
+#[test]
+fn ten_thousand_cycles_of_strikes() {
+    let cal = Calibration::default_cell();
+    let lim = MotionLimits::from_robot(&cal.robot);
+    let session = RsiSession::new(SessionConfig::from_calibration(&cal, "ImFree")).unwrap();
+    let mut server = RsiServer::bind("127.0.0.1:0".parse().unwrap(), session, WaitStrategy::Blocking).unwrap();
+    let addr = server.local_addr().unwrap();
+    let stop = Arc::new(AtomicBool::new(false));
+    let plans = Arc::new(PlanSlot::new());
+    let (s2, p2) = (stop.clone(), plans.clone());
+    let server_thread = std::thread::spawn(move || {
+        server
+            .run(&s2, &p2, |e| {
+                if let topspin::rsi::session::SessionEvent::PlanAccepted { seq, late_by, .. } = e
+                    && late_by.0 > 0
+                    && std::env::var("DBG").is_ok()
+                {
+                    eprintln!("plan {seq} late by {late_by:?}");
+                }
+            })
+            .unwrap();
+        server.into_session()
+    });
+
+    let n = env_u64("TOPSPIN_LOOPBACK_CYCLES", 10_000);
+    let mut mcfg = MockKrcConfig::default_cell().unwrap();
+    mcfg.sensor = addr;
+    mcfg.bind = "127.0.0.1:0".parse().unwrap();
+    mcfg.cycles = Some(n);
+    mcfg.answer_deadline = Duration::from_millis(env_u64("TOPSPIN_TEST_DEADLINE_MS", 20));
+    let start = runtime::now();
+    let mock = mock_krc::spawn(mcfg.clone()).unwrap();
+
+    // The strike stream: a ball every second, its plan refined every 4 ms
+    // from 0.6 s before the hit until 80 ms before it (then committed).
+    let mut rng = ChaCha8Rng::seed_from_u64(4);
+    let end = start + Duration::from_millis(n * 4);
+    let mut finals: Vec<StrikePlan> = Vec::new();
+    let mut seq = 0u32;
+    let mut ball = 0u32;
+    let mut t_ball = start + Duration::from_millis(400);
+    while t_ball + Duration::from_millis(1000) < end {
+        ball += 1;
+        let hit_time = t_ball + Duration::from_millis(600);
+        let fin = StrikePlan {
+            seq: 0,
+            trajectory: ball,
+            made_at: t_ball,
+            hit_time,
+            position: Vec3::new(1.60, rng.random_range(-0.45..0.45), rng.random_range(0.15..0.45)),
+            velocity: Vec3::new(-1.0, rng.random_range(-0.2..0.2), rng.random_range(-0.1..0.3)),
+            orientation: EulerZyx {
+                a: rng.random_range(-0.2..0.2),
+                b: rng.random_range(-0.6..0.45),
+                c: rng.random_range(-0.2..0.2),
+            },
+            spin: Vec3::zeros(),
+            confidence: 0.5,
+        };
+        let noise =
+            Vec3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0)) * 0.04;
+        let commit = hit_time.0 - 80_000_000;
+        let mut t = t_ball;
+        loop {
+            runtime::sleep_until(t, Duration::from_micros(100));
+            seq += 1;
+            let left = commit.saturating_sub(t.0) as f64 / (commit - t_ball.0) as f64;
+            let mut p = fin;
+            p.seq = seq;
+            p.made_at = t;
+            p.position += noise * left;
+            p.hit_time = Instant(hit_time.0 + (left * 3e6) as u64);
+            if t.0 >= commit {
+                p.hit_time = hit_time;
+                p.position = fin.position;
+                plans.publish(p);
+                finals.push(p);
+                break;
+            }
+            plans.publish(p);
+            t = t + Duration::from_millis(4);
+        }
+        t_ball = t_ball + Duration::from_millis(1000);
+    }
+    let r = mock.join().unwrap();
+    stop.store(true, Ordering::Relaxed);
+    let session = server_thread.join().unwrap();
+    let st = *session.stats();
+    eprintln!(
+        "mock: cycles {} late {} after one cycle {} wrong_ipoc {} poscorr_clamped {} robot_limited {} max_answer_delay {:?}",
+        r.cycles, r.late, r.answers_after_cycle, r.wrong_ipoc, r.poscorr_clamped, r.robot_limited, r.max_answer_delay
+    );
+    eprintln!("session: {st:?}");
+
+    assert_eq!(r.cycles, n);
+    assert_eq!(r.late, 0, "late answers");
+    assert_eq!(r.wrong_ipoc, 0, "IPOC not echoed");
+    assert_eq!(r.malformed + r.wrong_type, 0);
+    assert!(!r.stopped_by_limit && !r.stopped_by_monitor);
+    assert_eq!(st.plans_rejected, 0);
+    assert_eq!(r.poscorr_clamped, 0);
+
+    // The path within every limit. Path is mm / deg; limits m / rad.
+    let dt = 0.004;
+    let scale = |i: usize| {
+        if i < 3 { 1e3 } else { 180.0 / std::f64::consts::PI }
+    };
+    let mut v_prev = [0.0; 6];
+    for (k, s) in r.path.iter().enumerate() {
+        for i in 0..6 {
+            let x = s.commanded[i] / scale(i);
+            assert!(
+                x >= lim.lo[i] - 1e-9 && x <= lim.hi[i] + 1e-9,
+                "cycle {k} axis {i}: {x} outside [{}, {}]",
+                lim.lo[i],
+                lim.hi[i]
+            );
+            let prev = if k == 0 { mcfg.controller.start[i] } else { r.path[k - 1].commanded[i] };
+            let v = (s.commanded[i] - prev) / dt / scale(i);
+            assert!(v.abs() <= lim.vmax[i] * 1.001, "cycle {k} axis {i}: v {v}");
+            let a = (v - v_prev[i]) / dt;
+            assert!(a.abs() <= lim.amax[i] * 1.001 + 0.05, "cycle {k} axis {i}: a {a}");
+            v_prev[i] = v;
+        }
+    }
+    assert_eq!(r.robot_limited, 0, "the robot had to limit the command");
+
+    // The bat at each hitting pose at its hitting time.
+    assert!(finals.len() + 3 >= (n as usize * 4 / 1000), "{} strikes", finals.len());
+    let at = |t: f64| -> [f64; 6] {
+        let k = r.path.partition_point(|s| s.t.as_secs_f64() < t);
+        let k = k.clamp(1, r.path.len() - 1);
+        let (a, b) = (&r.path[k - 1], &r.path[k]);
+        let f = (t - a.t.as_secs_f64()) / (b.t.as_secs_f64() - a.t.as_secs_f64());
+        std::array::from_fn(|i| a.actual[i] + f * (b.actual[i] - a.actual[i]))
+    };
+    let mut worst = (0.0f64, 0.0f64, 0.0f64);
+    for p in &finals {
+        let target = lim.point_t_to_b(p.position) * 1e3;
+        let abc = lim.orientation_t_to_b(p.orientation).map(f64::to_degrees);
+        let th = p.hit_time.as_secs_f64();
+        let dist =
+            |q: [f64; 6]| ((q[0] - target.x).powi(2) + (q[1] - target.y).powi(2) + (q[2] - target.z).powi(2)).sqrt();
+        let best = (-20..=20).map(|j| dist(at(th + j as f64 * 1e-4))).fold(f64::INFINITY, f64::min);
+        let q = at(th);
+        let rot = (0..3).map(|i| (q[3 + i] - abc[i]).abs()).fold(0.0, f64::max);
+        eprintln!("strike {} best {best:.2} at-hit {:.2} target {:?} q {:?}", p.trajectory, dist(q), target, &q[..3]);
+        if std::env::var("DBG").is_ok() {
+            eprintln!(
+                "strike {} best {best:.2} at-hit {:.2} target {:?} q {:?}",
+                p.trajectory,
+                dist(q),
+                target,
+                &q[..3]
+            );
+            continue;
+        }
+        worst = (worst.0.max(best), worst.1.max(rot), worst.2.max(dist(q)));
+        assert!(best < 2.0, "strike {}: {best:.3} mm from the hitting point within ±2 ms", p.trajectory);
+        assert!(rot < 0.5, "strike {}: orientation off by {rot:.3}°", p.trajectory);
+    }
+    eprintln!(
+        "{} strikes; worst: {:.3} mm within ±2 ms, {:.3} mm at the hit time, {:.3}°",
+        finals.len(),
+        worst.0,
+        worst.2,
+        worst.1
+    );
+}
