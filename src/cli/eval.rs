@@ -21,6 +21,8 @@ pub enum EvalCommand {
     Fit(EvalFitArgs),
     /// Streaming estimator on balls back to back: plan error vs lead time.
     Stream(EvalStreamArgs),
+    /// Real launcher trajectories: bounce and look-ahead error with and without the fitted spin.
+    Real(super::eval_real::EvalRealArgs),
 }
 
 /// Options shared by the simulated evaluations.
@@ -66,6 +68,7 @@ pub fn run(cmd: EvalCommand) -> anyhow::Result<()> {
     match cmd {
         EvalCommand::Fit(a) => run_fit(a),
         EvalCommand::Stream(a) => run_stream(a),
+        EvalCommand::Real(a) => super::eval_real::run_real(a),
     }
 }
 

@@ -5,6 +5,7 @@
 use clap::{Parser, Subcommand};
 
 pub mod eval;
+pub mod eval_real;
 pub mod fit;
 pub mod mock_krc;
 pub mod replay_stream;

@@ -10,7 +10,7 @@
 
 use crate::physics::{LiftModel, PhysicsParams, Propagator};
 
-use super::eval::{EvalConfig, Predictor, PreparedTrajectory, Report, evaluate};
+use super::eval::{EvalConfig, Predictor, PreparedTrajectory, Report, TrajectoryResult, evaluate};
 use super::mpi::median;
 
 /// A physics constant the search may move.
@@ -102,6 +102,11 @@ pub enum Objective {
     MedianSum,
     /// Mean bounce error + mean error at the horizon.
     MeanSum,
+    /// Per set: median bounce error + median error at the horizon; then the
+    /// mean over the sets. Every kind of shot weighs the same, however many
+    /// trajectories it has (the pooled medians would follow the 48
+    /// robot_no_spin shots and ignore the spin sets).
+    SetMedianSum,
 }
 
 /// The error charged for a missing prediction, mm.
@@ -110,27 +115,54 @@ pub const MISSING_PENALTY_MM: f64 = 1000.0;
 impl Objective {
     /// The objective's value for a report.
     pub fn value(self, rep: &Report, min_samples: usize) -> f64 {
-        let mut bounce = Vec::new();
-        let mut ahead = Vec::new();
-        for r in rep.results.iter().filter(|r| r.samples_used >= min_samples) {
-            if r.real_bounce.is_some() {
-                bounce.push(r.bounce_error_mm.unwrap_or(MISSING_PENALTY_MM));
+        if self == Objective::SetMedianSum {
+            let mut names: Vec<&str> = Vec::new();
+            for r in &rep.results {
+                if !names.contains(&r.set.as_str()) {
+                    names.push(&r.set);
+                }
             }
-            if r.real_ahead.is_some() || r.prediction.is_none() {
-                ahead.push(r.ahead_error_mm.unwrap_or(MISSING_PENALTY_MM));
-            }
+            let per_set: Vec<f64> = names
+                .iter()
+                .map(|name| {
+                    let (bounce, ahead) = errors(rep.results.iter().filter(|r| r.set == *name), min_samples);
+                    med(bounce) + med(ahead)
+                })
+                .collect();
+            return mean(&per_set);
         }
-        let mean = |v: &[f64]| {
-            if v.is_empty() { 0.0 } else { v.iter().sum::<f64>() / v.len() as f64 }
-        };
-        let med = |v: &mut Vec<f64>| if v.is_empty() { 0.0 } else { median(v) };
+        let (bounce, ahead) = errors(rep.results.iter(), min_samples);
         match self {
-            Objective::MedianBounce => med(&mut bounce),
-            Objective::MedianAhead => med(&mut ahead),
-            Objective::MedianSum => med(&mut bounce) + med(&mut ahead),
+            Objective::MedianBounce => med(bounce),
+            Objective::MedianAhead => med(ahead),
+            Objective::MedianSum | Objective::SetMedianSum => med(bounce) + med(ahead),
             Objective::MeanSum => mean(&bounce) + mean(&ahead),
         }
     }
+}
+
+/// Bounce and horizon errors of the results, missing predictions charged
+/// [`MISSING_PENALTY_MM`].
+fn errors<'a>(results: impl Iterator<Item = &'a TrajectoryResult>, min_samples: usize) -> (Vec<f64>, Vec<f64>) {
+    let mut bounce = Vec::new();
+    let mut ahead = Vec::new();
+    for r in results.filter(|r| r.samples_used >= min_samples) {
+        if r.real_bounce.is_some() {
+            bounce.push(r.bounce_error_mm.unwrap_or(MISSING_PENALTY_MM));
+        }
+        if r.real_ahead.is_some() || r.prediction.is_none() {
+            ahead.push(r.ahead_error_mm.unwrap_or(MISSING_PENALTY_MM));
+        }
+    }
+    (bounce, ahead)
+}
+
+fn mean(v: &[f64]) -> f64 {
+    if v.is_empty() { 0.0 } else { v.iter().sum::<f64>() / v.len() as f64 }
+}
+
+fn med(mut v: Vec<f64>) -> f64 {
+    if v.is_empty() { 0.0 } else { median(&mut v) }
 }
 
 /// What to calibrate and how long to search.
@@ -144,6 +176,16 @@ pub struct CalibrationSetup {
     pub max_evals: usize,
     /// Stop when the simplex's objective values differ by less, mm.
     pub tolerance: f64,
+    /// Narrower admissible ranges than [`CalibParam::range`] for some
+    /// parameters (e.g. the literature's range of C_D).
+    pub ranges: Vec<(CalibParam, (f64, f64))>,
+}
+
+impl CalibrationSetup {
+    /// The admissible range of `k` in this search.
+    pub fn range(&self, k: CalibParam) -> (f64, f64) {
+        self.ranges.iter().find(|(p, _)| *p == k).map_or_else(|| k.range(), |(_, r)| *r)
+    }
 }
 
 impl CalibrationSetup {
@@ -155,6 +197,7 @@ impl CalibrationSetup {
             objective: Objective::MedianSum,
             max_evals: 150,
             tolerance: 0.05,
+            ranges: Vec::new(),
         }
     }
 }
@@ -196,7 +239,7 @@ pub fn with_physics(cfg: &EvalConfig, p: &PhysicsParams) -> EvalConfig {
 pub fn evaluate_with<F, P>(trajs: &[PreparedTrajectory], factory: &F, cfg: &EvalConfig, p: &PhysicsParams) -> Report
 where
     F: Fn(&PhysicsParams) -> P,
-    P: Predictor,
+    P: Predictor + Sync,
 {
     evaluate(trajs, &factory(p), &with_physics(cfg, p))
 }
@@ -213,7 +256,7 @@ pub fn calibrate<F, P>(
 ) -> CalibrationResult
 where
     F: Fn(&PhysicsParams) -> P,
-    P: Predictor,
+    P: Predictor + Sync,
 {
     let params = &setup.params;
     let make = |x: &[f64]| {
@@ -226,7 +269,7 @@ where
     let objective = |x: &[f64]| -> f64 {
         let mut penalty = 0.0;
         for (k, v) in params.iter().zip(x) {
-            let (lo, hi) = k.range();
+            let (lo, hi) = setup.range(*k);
             if !(v.is_finite() && *v >= lo && *v <= hi) {
                 penalty += 1e6 * (1.0 + (lo - v).max(v - hi).max(0.0));
             }

@@ -287,6 +287,24 @@ pub fn evaluate_one<P: Predictor + ?Sized>(
     predictor: &P,
     cfg: &EvalConfig,
 ) -> TrajectoryResult {
+    score_one(tr, predict_one(tr, predictor, cfg), cfg)
+}
+
+/// The predictor's output for one trajectory (`None` with too few pre-net
+/// samples, a declined or a non-finite prediction).
+pub fn predict_one<P: Predictor + ?Sized>(
+    tr: &PreparedTrajectory,
+    predictor: &P,
+    cfg: &EvalConfig,
+) -> Option<Prediction> {
+    if tr.pre_net < cfg.min_samples {
+        return None;
+    }
+    predictor.predict(&tr.samples[..tr.pre_net]).filter(|p| p.state.is_finite())
+}
+
+/// Scores a prediction made from `tr`'s pre-net samples.
+pub fn score_one(tr: &PreparedTrajectory, prediction: Option<Prediction>, cfg: &EvalConfig) -> TrajectoryResult {
     let mut r = TrajectoryResult {
         set: tr.set.clone(),
         index: tr.index,
@@ -303,7 +321,7 @@ pub fn evaluate_one<P: Predictor + ?Sized>(
         return r;
     }
     let used = &tr.samples[..tr.pre_net];
-    let Some(pred) = predictor.predict(used).filter(|p| p.state.is_finite()) else {
+    let Some(pred) = prediction.filter(|p| p.state.is_finite()) else {
         return r;
     };
     r.prediction = Some(pred);
@@ -321,6 +339,28 @@ pub fn evaluate_one<P: Predictor + ?Sized>(
         r.ahead_error_mm = Some(1e3 * (p - q).norm());
     }
     r
+}
+
+/// The predictor's output for every trajectory, in order, spread over the
+/// available cores (each trajectory is independent; the result does not
+/// depend on the thread count).
+pub fn predict_all<P: Predictor + Sync + ?Sized>(
+    trajs: &[PreparedTrajectory],
+    predictor: &P,
+    cfg: &EvalConfig,
+) -> Vec<Option<Prediction>> {
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get()).clamp(1, 16);
+    if threads == 1 || trajs.len() < 8 {
+        return trajs.iter().map(|tr| predict_one(tr, predictor, cfg)).collect();
+    }
+    let chunk = trajs.len().div_ceil(threads);
+    std::thread::scope(|scope| {
+        let handles: Vec<_> = trajs
+            .chunks(chunk)
+            .map(|part| scope.spawn(move || part.iter().map(|tr| predict_one(tr, predictor, cfg)).collect::<Vec<_>>()))
+            .collect();
+        handles.into_iter().flat_map(|h| h.join().expect("a prediction thread panicked")).collect()
+    })
 }
 
 fn group(name: &str, results: &[&TrajectoryResult], cfg: &EvalConfig) -> GroupReport {
@@ -345,8 +385,20 @@ fn group(name: &str, results: &[&TrajectoryResult], cfg: &EvalConfig) -> GroupRe
 }
 
 /// Evaluates `predictor` on every trajectory and summarises per set.
-pub fn evaluate<P: Predictor + ?Sized>(trajs: &[PreparedTrajectory], predictor: &P, cfg: &EvalConfig) -> Report {
-    let results: Vec<TrajectoryResult> = trajs.iter().map(|tr| evaluate_one(tr, predictor, cfg)).collect();
+pub fn evaluate<P: Predictor + Sync + ?Sized>(trajs: &[PreparedTrajectory], predictor: &P, cfg: &EvalConfig) -> Report {
+    evaluate_predictions(trajs, &predict_all(trajs, predictor, cfg), cfg)
+}
+
+/// Scores predictions made earlier (`predictions[i]` from `trajs[i]`, as
+/// [`predict_all`] returns them) and summarises per set: one fit, several
+/// horizons.
+pub fn evaluate_predictions(
+    trajs: &[PreparedTrajectory],
+    predictions: &[Option<Prediction>],
+    cfg: &EvalConfig,
+) -> Report {
+    let results: Vec<TrajectoryResult> =
+        trajs.iter().zip(predictions).map(|(tr, pred)| score_one(tr, *pred, cfg)).collect();
     let mut names: Vec<&str> = SETS.to_vec();
     for r in &results {
         if !names.contains(&r.set.as_str()) {

@@ -20,3 +20,5 @@ pub mod eval;
 pub mod frame;
 pub mod mpi;
 pub mod poly;
+pub mod spin;
+pub mod study;
