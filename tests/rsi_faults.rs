@@ -8,7 +8,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use topspin::calib::Calibration;
 use topspin::mock_krc::{self, Faults, MockKrcConfig, MockResult};
-use topspin::rsi::server::{PlanSlot, RsiServer, WaitStrategy};
+use topspin::rsi::server::{RsiServer, WaitStrategy, plan_slot};
 use topspin::rsi::session::{MAX_ANSWER_LEN, RsiSession, SessionConfig};
 use topspin::time::{Duration, Instant};
 
@@ -19,7 +19,7 @@ fn run_with(faults: Faults, late_limit: u64, cycles: u64) -> MockResult {
     let addr = server.local_addr().unwrap();
     let stop = Arc::new(AtomicBool::new(false));
     let s2 = stop.clone();
-    let t = std::thread::spawn(move || server.run(&s2, &PlanSlot::new(), |_| {}).unwrap());
+    let t = std::thread::spawn(move || server.run(&s2, &mut plan_slot().1, |_| {}).unwrap());
     let mut cfg = MockKrcConfig::default_cell().unwrap();
     cfg.sensor = addr;
     cfg.bind = "127.0.0.1:0".parse().unwrap();

@@ -23,7 +23,7 @@ use topspin::mock_krc::{self, MockKrcConfig};
 use topspin::motion::MotionLimits;
 use topspin::physics::Vec3;
 use topspin::plan::{EulerZyx, StrikePlan};
-use topspin::rsi::server::{PlanSlot, RsiServer, WaitStrategy};
+use topspin::rsi::server::{RsiServer, WaitStrategy, plan_slot};
 use topspin::rsi::session::{RsiSession, SessionConfig};
 use topspin::runtime;
 use topspin::time::{Duration, Instant};
@@ -40,11 +40,11 @@ fn ten_thousand_cycles_of_strikes() {
     let mut server = RsiServer::bind("127.0.0.1:0".parse().unwrap(), session, WaitStrategy::Blocking).unwrap();
     let addr = server.local_addr().unwrap();
     let stop = Arc::new(AtomicBool::new(false));
-    let plans = Arc::new(PlanSlot::new());
-    let (s2, p2) = (stop.clone(), plans.clone());
+    let (mut plans, mut reader) = plan_slot();
+    let s2 = stop.clone();
     let server_thread = std::thread::spawn(move || {
         server
-            .run(&s2, &p2, |e| {
+            .run(&s2, &mut reader, |e| {
                 if let topspin::rsi::session::SessionEvent::PlanAccepted { seq, late_by, .. } = e
                     && late_by.0 > 0
                     && std::env::var("DBG").is_ok()

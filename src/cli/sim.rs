@@ -8,7 +8,6 @@ use std::fmt::Write as _;
 use std::io::Write as _;
 use std::net::UdpSocket;
 use std::path::{Path, PathBuf};
-use std::time::Duration;
 
 use anyhow::Context as _;
 use serde::Serialize;
@@ -16,8 +15,6 @@ use serde::Serialize;
 use super::BadInput;
 use crate::calib::Calibration;
 use crate::sim::{self, Setting, SimBall, TrackerModel, Truth};
-use crate::time::Instant;
-use crate::wire::observation::{OBSERVATION_LEN, Observation};
 
 /// Where the live stream's capture clock starts before the first launch, s
 /// (the tracker's monotonic clock counts from the start of the stream).
@@ -252,43 +249,18 @@ fn write_files(dir: &Path, a: &SimOptions, p: &Plan, balls: &[SimBall], starts: 
     Ok(())
 }
 
-/// Sends every observation as a TTB1 datagram at its arrival time
-/// (capture + latency) on the wall clock. The capture clock counts ns from
-/// the start of the stream; ball k is launched at `STREAM_LEAD + starts[k]`.
+/// Streams in real time (see [`crate::sim::stream`]); the capture clock is
+/// the process clock, ball k launched at `STREAM_LEAD + starts[k]` s after
+/// the start.
 fn stream(to: &str, bind: &str, tracker: &TrackerModel, balls: &[SimBall], starts: &[f64]) -> anyhow::Result<()> {
     let socket = UdpSocket::bind(bind).map_err(|e| bad(format!("--bind {bind}: {e}")))?;
     socket.connect(to).map_err(|e| bad(format!("--to {to}: {e}")))?;
-    let epoch = std::time::Instant::now();
-    let mut seq: u32 = 0;
-    let mut buf = [0u8; OBSERVATION_LEN];
-    let mut sent = 0usize;
-    for (b, start) in balls.iter().zip(starts) {
-        for o in &b.observations {
-            let capture = STREAM_LEAD + start + o.t;
-            let arrival = Duration::from_secs_f64(capture + tracker.latency);
-            if let Some(wait) = arrival.checked_sub(epoch.elapsed()) {
-                std::thread::sleep(wait);
-            }
-            Observation {
-                seq,
-                capture: Instant::from_secs_f64(capture),
-                pos: [o.pos.x as f32, o.pos.y as f32, o.pos.z as f32],
-                residual: f32::NAN,
-                cameras: 2,
-                valid: true,
-            }
-            .emit(&mut buf);
-            match socket.send(&buf) {
-                Ok(_) => sent += 1,
-                // Nobody listening yet (ICMP port unreachable): a tracker
-                // does not stop for that.
-                Err(e) if e.kind() == std::io::ErrorKind::ConnectionRefused => {}
-                Err(e) => return Err(anyhow::Error::new(e).context(format!("sending to {to}"))),
-            }
-            seq = seq.wrapping_add(1);
-        }
-    }
+    let t0 = crate::runtime::now() + crate::time::Duration::from_nanos((STREAM_LEAD * 1e9) as u64);
+    let stop = std::sync::atomic::AtomicBool::new(false);
+    let stats = crate::sim::stream::stream(&socket, balls, starts, tracker.latency, t0, &stop)
+        .with_context(|| format!("sending to {to}"))?;
+    let total: usize = balls.iter().map(|b| b.observations.len()).sum();
     let mut err = std::io::stderr().lock();
-    let _ = writeln!(err, "topspin sim: sent {sent} of {seq} datagrams to {to}");
+    let _ = writeln!(err, "topspin sim: sent {} of {total} datagrams to {to}", stats.sent);
     Ok(())
 }

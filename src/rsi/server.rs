@@ -4,17 +4,17 @@
 //! Wait strategy (DESIGN §10): `Blocking` sleeps in `recv_from` (cheap on
 //! CPU, ≈30 µs wake-up each way across cores) or `BusyPoll` spins on a
 //! non-blocking socket (≈3.5 µs, burns a core). Plans arrive through a
-//! [`PlanSlot`] (latest value; the loop only ever `try_lock`s it, so it
-//! never waits for the writer). The daemon's RSI thread grows out of this.
+//! wait-free latest-value slot ([`plan_slot`]). The daemon's RSI thread
+//! runs this loop.
 
 use std::io;
 use std::net::{SocketAddr, UdpSocket};
-use std::sync::Mutex;
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use super::session::{MAX_ANSWER_LEN, RsiSession, SessionEvent};
 use crate::plan::StrikePlan;
 use crate::runtime;
+use crate::time::Instant;
 
 /// Largest request read, bytes.
 pub const MAX_REQUEST_LEN: usize = 2048;
@@ -28,27 +28,49 @@ pub enum WaitStrategy {
     BusyPoll,
 }
 
-/// The latest strike plan: the writer overwrites, the reader takes the
-/// newest without waiting (a contended slot is simply read next cycle).
-#[derive(Debug, Default)]
-pub struct PlanSlot {
-    slot: Mutex<Option<StrikePlan>>,
+/// The writing end of the latest-value plan slot (the estimator thread).
+#[derive(Debug)]
+pub struct PlanWriter(triple_buffer::Input<Option<StrikePlan>>);
+
+/// The reading end (the RSI loop): takes the newest plan, never waits, and
+/// never works through a backlog of stale ones (DESIGN §4).
+#[derive(Debug)]
+pub struct PlanReader(triple_buffer::Output<Option<StrikePlan>>);
+
+/// A wait-free single-producer single-consumer latest-value slot for
+/// strike plans (a triple buffer: the writer overwrites, the reader sees
+/// the newest complete value).
+pub fn plan_slot() -> (PlanWriter, PlanReader) {
+    let (input, output) = triple_buffer::triple_buffer(&None);
+    (PlanWriter(input), PlanReader(output))
 }
 
-impl PlanSlot {
-    pub fn new() -> Self {
-        Self::default()
-    }
-
+impl PlanWriter {
     /// Publishes `plan`, replacing any not yet taken.
-    pub fn publish(&self, plan: StrikePlan) {
-        let mut g = self.slot.lock().unwrap_or_else(|e| e.into_inner());
-        *g = Some(plan);
+    pub fn publish(&mut self, plan: StrikePlan) {
+        self.0.write(Some(plan));
     }
+}
 
-    /// Takes the newest plan if there is one and the slot is free now.
-    pub fn try_take(&self) -> Option<StrikePlan> {
-        self.slot.try_lock().ok().and_then(|mut g| g.take())
+impl PlanReader {
+    /// The newest plan published since the last call, if any.
+    pub fn take(&mut self) -> Option<StrikePlan> {
+        if self.0.update() { *self.0.output_buffer() } else { None }
+    }
+}
+
+/// What the loop reports besides answering: session events, and every
+/// exchange with its timing (for telemetry and recording).
+pub trait RsiSink {
+    fn event(&mut self, e: SessionEvent);
+    /// One answered request: arrival of the request, the bytes both ways,
+    /// and when the answer left.
+    fn exchange(&mut self, _arrival: Instant, _request: &[u8], _answer: &[u8], _sent: Instant) {}
+}
+
+impl<F: FnMut(SessionEvent)> RsiSink for F {
+    fn event(&mut self, e: SessionEvent) {
+        self(e)
     }
 }
 
@@ -89,8 +111,8 @@ impl RsiServer {
     pub fn run(
         &mut self,
         stop: &AtomicBool,
-        plans: &PlanSlot,
-        mut on_event: impl FnMut(SessionEvent),
+        plans: &mut PlanReader,
+        mut sink: impl RsiSink,
     ) -> io::Result<()> {
         while !stop.load(Ordering::Relaxed) {
             let (n, from) = match self.socket.recv_from(&mut self.rx) {
@@ -101,25 +123,29 @@ impl RsiServer {
                     }
                     self.session.handle_timeout(runtime::now());
                     while let Some(e) = self.session.poll_event() {
-                        on_event(e);
+                        sink.event(e);
                     }
                     continue;
                 }
                 Err(e) => return Err(e),
             };
             let now = runtime::now();
-            if let Some(p) = plans.try_take() {
+            if let Some(p) = plans.take() {
                 self.session.set_plan(p);
             }
             if let Ok(len) = self.session.handle_datagram(now, &self.rx[..n], &mut self.tx) {
                 match self.socket.send_to(&self.tx[..len], from) {
-                    Ok(_) => self.session.answer_sent(runtime::now()),
+                    Ok(_) => {
+                        let sent = runtime::now();
+                        self.session.answer_sent(sent);
+                        sink.exchange(now, &self.rx[..n], &self.tx[..len], sent);
+                    }
                     Err(e) if e.kind() == io::ErrorKind::WouldBlock => {}
                     Err(e) => return Err(e),
                 }
             }
             while let Some(e) = self.session.poll_event() {
-                on_event(e);
+                sink.event(e);
             }
         }
         Ok(())

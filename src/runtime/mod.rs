@@ -4,6 +4,8 @@
 
 use std::sync::OnceLock;
 
+pub mod rt;
+
 use crate::time::{Duration, Instant};
 
 /// How early a deadline sleep wakes before spinning (DESIGN §10).

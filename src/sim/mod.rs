@@ -11,6 +11,7 @@
 //! line writes files and paces the live stream.
 
 pub mod launcher;
+pub mod stream;
 pub mod tracker;
 pub mod truth;
 

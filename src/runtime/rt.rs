@@ -1,0 +1,110 @@
+//! Real-time set-up of the daemon's threads (DESIGN §4, §10): pin a thread
+//! to a core, give it SCHED_FIFO at a priority, lock the process's memory.
+//! Where the OS refuses (no CAP_SYS_NICE / CAP_IPC_LOCK, not root), the
+//! refusal is returned as a warning naming what was refused and how to
+//! allow it; the daemon logs it once and carries on.
+
+use std::fmt;
+
+/// One refused real-time request.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct RtWarning {
+    pub thread: &'static str,
+    pub what: RtRefused,
+}
+
+/// What the OS refused.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum RtRefused {
+    /// Pinning to the core failed (no such core, or not permitted).
+    Pin { core: usize },
+    /// `pthread_setschedparam(SCHED_FIFO)` failed with this errno.
+    Fifo { priority: i32, errno: i32 },
+    /// `mlockall` failed with this errno.
+    Mlock { errno: i32 },
+}
+
+impl fmt::Display for RtWarning {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self.what {
+            RtRefused::Pin { core } => write!(
+                f,
+                "{}: could not pin to core {core} (does it exist? is the service's CPUAffinity narrower?)",
+                self.thread
+            ),
+            RtRefused::Fifo { priority, errno } => write!(
+                f,
+                "{}: SCHED_FIFO priority {priority} refused (errno {errno}): grant CAP_SYS_NICE and LimitRTPRIO \
+                 (deploy/topspin.service) or run with threads.realtime = false; running with normal scheduling",
+                self.thread
+            ),
+            RtRefused::Mlock { errno } => write!(
+                f,
+                "{}: mlockall refused (errno {errno}): grant CAP_IPC_LOCK and LimitMEMLOCK=infinity; memory may page",
+                self.thread
+            ),
+        }
+    }
+}
+
+/// Pins the calling thread to `core`.
+pub fn pin_current(thread: &'static str, core: usize) -> Result<(), RtWarning> {
+    let ok = core_affinity::get_core_ids()
+        .and_then(|ids| ids.into_iter().find(|c| c.id == core))
+        .is_some_and(core_affinity::set_for_current);
+    if ok { Ok(()) } else { Err(RtWarning { thread, what: RtRefused::Pin { core } }) }
+}
+
+fn errno() -> i32 {
+    std::io::Error::last_os_error().raw_os_error().unwrap_or(0)
+}
+
+/// Gives the calling thread SCHED_FIFO at `priority` (1–99).
+#[allow(unsafe_code)]
+pub fn fifo_current(thread: &'static str, priority: i32) -> Result<(), RtWarning> {
+    let param = libc::sched_param { sched_priority: priority };
+    // SAFETY: pthread_self() is the calling thread's valid handle and
+    // `param` a valid sched_param that outlives the call.
+    let rc = unsafe { libc::pthread_setschedparam(libc::pthread_self(), libc::SCHED_FIFO, &param) };
+    if rc == 0 { Ok(()) } else { Err(RtWarning { thread, what: RtRefused::Fifo { priority, errno: rc } }) }
+}
+
+/// Locks all current and future pages of the process in memory.
+#[allow(unsafe_code)]
+pub fn lock_memory() -> Result<(), RtWarning> {
+    // SAFETY: mlockall takes flags only and touches no Rust-managed memory.
+    let rc = unsafe { libc::mlockall(libc::MCL_CURRENT | libc::MCL_FUTURE) };
+    if rc == 0 { Ok(()) } else { Err(RtWarning { thread: "process", what: RtRefused::Mlock { errno: errno() } }) }
+}
+
+/// Pins and prioritises the calling thread as configured; returns what was
+/// refused.
+pub fn setup_current(thread: &'static str, core: Option<usize>, priority: Option<i32>) -> Vec<RtWarning> {
+    let mut warnings = Vec::new();
+    if let Some(c) = core
+        && let Err(w) = pin_current(thread, c)
+    {
+        warnings.push(w);
+    }
+    if let Some(p) = priority
+        && let Err(w) = fifo_current(thread, p)
+    {
+        warnings.push(w);
+    }
+    warnings
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn refusals_are_warnings_not_failures() {
+        // Whatever this machine permits, the calls return and say what was refused.
+        let w = setup_current("test", Some(usize::MAX), None);
+        assert_eq!(w, vec![RtWarning { thread: "test", what: RtRefused::Pin { core: usize::MAX } }]);
+        assert!(w[0].to_string().contains("core"));
+        let msg = RtWarning { thread: "rsi", what: RtRefused::Fifo { priority: 80, errno: 1 } }.to_string();
+        assert!(msg.contains("CAP_SYS_NICE"), "{msg}");
+    }
+}
