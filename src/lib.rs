@@ -25,6 +25,7 @@
 pub mod calib;
 pub mod cli;
 pub mod data;
+pub mod demo;
 pub mod estimator;
 pub mod eval;
 pub mod fit;

@@ -4,6 +4,7 @@
 
 use clap::{Parser, Subcommand};
 
+pub mod demo;
 pub mod eval;
 pub mod eval_real;
 pub mod fit;
@@ -32,6 +33,8 @@ pub enum Command {
     /// Simulate launcher balls seen by the tracker: CSV + ground truth, or a
     /// live UDP stream.
     Sim(sim::SimArgs),
+    /// Everything on loopback: simulated tracker, daemon, mock KR C4; judges every stroke.
+    Demo(demo::DemoArgs),
     /// Spin and prediction for one recorded trajectory (CSV t,x,y,z).
     Fit(fit::FitArgs),
     /// Offline evaluations: accuracy tables on simulated and real flights.
@@ -47,6 +50,7 @@ pub fn main() -> i32 {
     let result = match cli.command {
         Command::Sim(a) => sim::run(a),
         Command::Fit(a) => fit::run(a),
+        Command::Demo(a) => demo::run(a),
         Command::Eval(c) => eval::run(c),
         Command::MockKrc(a) => mock_krc::run(a),
     };

@@ -80,6 +80,10 @@ pub struct RsiServer {
     socket: UdpSocket,
     session: RsiSession,
     wait: WaitStrategy,
+    /// Only requests from this address are answered.
+    allowed: Option<std::net::IpAddr>,
+    /// Requests from other addresses, ignored.
+    foreign: u64,
     rx: [u8; MAX_REQUEST_LEN],
     tx: [u8; MAX_ANSWER_LEN],
 }
@@ -92,7 +96,26 @@ impl RsiServer {
             WaitStrategy::Blocking => socket.set_read_timeout(Some(STOP_POLL))?,
             WaitStrategy::BusyPoll => socket.set_nonblocking(true)?,
         }
-        Ok(RsiServer { socket, session, wait, rx: [0; MAX_REQUEST_LEN], tx: [0; MAX_ANSWER_LEN] })
+        Ok(RsiServer {
+            socket,
+            session,
+            wait,
+            allowed: None,
+            foreign: 0,
+            rx: [0; MAX_REQUEST_LEN],
+            tx: [0; MAX_ANSWER_LEN],
+        })
+    }
+
+    /// Answers only requests from `ip` (the controller); others are
+    /// ignored and counted.
+    pub fn allow_only(&mut self, ip: std::net::IpAddr) {
+        self.allowed = Some(ip);
+    }
+
+    /// Requests ignored because they came from another address.
+    pub fn foreign(&self) -> u64 {
+        self.foreign
     }
 
     pub fn local_addr(&self) -> io::Result<SocketAddr> {
@@ -108,12 +131,7 @@ impl RsiServer {
     }
 
     /// Runs until `stop`; hands every session event to `on_event`.
-    pub fn run(
-        &mut self,
-        stop: &AtomicBool,
-        plans: &mut PlanReader,
-        mut sink: impl RsiSink,
-    ) -> io::Result<()> {
+    pub fn run(&mut self, stop: &AtomicBool, plans: &mut PlanReader, mut sink: impl RsiSink) -> io::Result<()> {
         while !stop.load(Ordering::Relaxed) {
             let (n, from) = match self.socket.recv_from(&mut self.rx) {
                 Ok(x) => x,
@@ -130,6 +148,10 @@ impl RsiServer {
                 Err(e) => return Err(e),
             };
             let now = runtime::now();
+            if self.allowed.is_some_and(|ip| ip != from.ip()) {
+                self.foreign += 1;
+                continue;
+            }
             if let Some(p) = plans.take() {
                 self.session.set_plan(p);
             }

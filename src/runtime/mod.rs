@@ -1,10 +1,14 @@
-//! The runtime layer's clock: the only place that reads the monotonic
-//! clock (DESIGN §2, STYLE habit 1). Threads and sockets live beside it
-//! (`rsi::server`, `mock_krc::runner`); the core gets `Instant`s from here.
+//! The runtime layer: the only place that reads the monotonic clock
+//! (DESIGN §2, STYLE habit 1), the daemon's threads ([`daemon`]), their
+//! real-time set-up ([`rt`]) and telemetry ([`telemetry`]). Sockets live
+//! here and in the thin loops `rsi::server`, `mock_krc::runner` and
+//! `sim::stream`; the core gets `Instant`s from here.
 
 use std::sync::OnceLock;
 
+pub mod daemon;
 pub mod rt;
+pub mod telemetry;
 
 use crate::time::{Duration, Instant};
 

@@ -1,0 +1,140 @@
+//! `topspin demo`: the simulated tracker, the daemon and the mock KR C4 on
+//! loopback; a table per ball and a summary, or one JSON object.
+
+use clap::Args;
+
+use super::BadInput;
+use crate::calib::Calibration;
+use crate::demo::{DemoConfig, DemoReport, HIT_RADIUS, HIT_WINDOW, run as run_demo};
+use crate::sim::TrackerModel;
+
+#[derive(Debug, Args)]
+pub struct DemoArgs {
+    /// Number of launcher balls (cycling through the nine settings).
+    #[arg(long, default_value_t = 9)]
+    pub balls: usize,
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Tracker noise per axis, mm.
+    #[arg(long, default_value_t = 2.0)]
+    pub noise_mm: f64,
+    /// Share of tracker frames lost.
+    #[arg(long, default_value_t = 0.0)]
+    pub dropout: f64,
+    /// Launch-to-launch gap, s.
+    #[arg(long, default_value_t = 1.5)]
+    pub gap: f64,
+    /// One JSON object instead of the table.
+    #[arg(long)]
+    pub json: bool,
+}
+
+pub fn run(a: DemoArgs) -> anyhow::Result<()> {
+    if a.balls == 0 {
+        return Err(BadInput("--balls must be at least 1".into()).into());
+    }
+    if !(a.noise_mm.is_finite() && a.noise_mm >= 0.0) {
+        return Err(BadInput(format!("--noise-mm {} must be ≥ 0", a.noise_mm)).into());
+    }
+    if !(0.0..1.0).contains(&a.dropout) {
+        return Err(BadInput(format!("--dropout {} must be in [0, 1)", a.dropout)).into());
+    }
+    if !(a.gap.is_finite() && a.gap > 0.0) {
+        return Err(BadInput(format!("--gap {} must be positive", a.gap)).into());
+    }
+    let cal = Calibration::default_cell();
+    let cfg = DemoConfig {
+        balls: a.balls,
+        seed: a.seed,
+        tracker: TrackerModel { noise_sigma: a.noise_mm * 1e-3, dropout: a.dropout, ..TrackerModel::default() },
+        gap: a.gap,
+        ..DemoConfig::default()
+    };
+    if !a.json {
+        eprintln!(
+            "topspin demo: {} balls, {} mm tracker noise, daemon and mock KR C4 (4 ms RSI) on loopback, about {:.0} s",
+            a.balls,
+            a.noise_mm,
+            a.balls as f64 * a.gap + 1.5
+        );
+    }
+    let report = run_demo(&cfg, &cal)?;
+    if a.json {
+        println!("{}", serde_json::to_string(&report)?);
+    } else {
+        print!("{}", table(&report));
+    }
+    Ok(())
+}
+
+fn rps(v: &[f64; 3]) -> String {
+    format!("({:6.1} {:6.1} {:6.1})", v[0], v[1], v[2])
+}
+
+/// The per-ball table and the summary.
+pub fn table(r: &DemoReport) -> String {
+    use std::fmt::Write;
+    let mut out = String::new();
+    let _ = writeln!(
+        out,
+        "ball  setting          true spin rps (x y z)   estimated spin rps      spin err  hit err   verdict       \
+         (plan err, plan Δt, bat vs plan)"
+    );
+    for b in &r.per_ball {
+        let est = b.estimated_spin_rps.as_ref().map_or("        no plan        ".to_owned(), rps);
+        let spin_err = b.spin_err_pct.map_or("    -".to_owned(), |e| format!("{e:5.1}%"));
+        let hit_err = b.hit_err_mm.map_or("     -".to_owned(), |e| format!("{e:5.1} mm"));
+        let verdict = match (b.reachable, b.hit) {
+            (false, _) => "out of reach",
+            (true, true) => "HIT",
+            (true, false) => "miss",
+        };
+        let diag = match (b.plan_err_mm, b.plan_dt_ms, b.tracking_err_mm) {
+            (Some(p), Some(dt), Some(tr)) => format!("({p:.1} mm, {dt:+.1} ms, {tr:.1} mm)"),
+            _ => String::new(),
+        };
+        let _ = writeln!(
+            out,
+            "{:4}  {:15}  {}  {}  {:>8}  {:>8}  {verdict:12}  {diag}",
+            b.ball,
+            b.setting,
+            rps(&b.true_spin_rps),
+            est,
+            spin_err,
+            hit_err
+        );
+    }
+    let l = &r.latency_us;
+    let _ = writeln!(
+        out,
+        "\n{} of {} reachable balls hit ({:.1}%; bat within {:.0} mm of the ball within ±{} ms of the true crossing), \
+         {} out of reach",
+        r.hits,
+        r.reachable,
+        r.hit_rate * 100.0,
+        HIT_RADIUS * 1e3,
+        HIT_WINDOW.0 / 1_000_000,
+        r.balls - r.reachable
+    );
+    let _ = writeln!(
+        out,
+        "median spin error {:.1}%, median hit error {:.1} mm; RSI: {} cycles, {} late answers; bat home at the end: {}",
+        r.spin_err_pct_median, r.hit_err_mm_median, r.rsi_cycles, r.late_rsi_answers, r.ended_home
+    );
+    let _ = writeln!(
+        out,
+        "latency µs (p50 / p99 / p99.9 / max): RSI answer {} / {} / {} / {}, observation → plan {} / {} / {} / {}",
+        l.rsi_answer.p50,
+        l.rsi_answer.p99,
+        l.rsi_answer.p999,
+        l.rsi_answer.max,
+        l.obs_to_plan.p50,
+        l.obs_to_plan.p99,
+        l.obs_to_plan.p999,
+        l.obs_to_plan.max
+    );
+    for w in &r.warnings {
+        let _ = writeln!(out, "warning: {w}");
+    }
+    out
+}

@@ -1,0 +1,429 @@
+//! The daemon's threads (DESIGN §4): ingest → estimator → RSI loop, and
+//! telemetry. Each hot thread is a thin loop around a sans-IO core
+//! (`Ingest`, `Estimator`, `RsiSession`); they talk through SPSC rings of
+//! named capacity (rtrb) and a wait-free latest-value plan slot, and report
+//! through their own telemetry ring. Threads are pinned and given SCHED_FIFO
+//! where configured and permitted (refusals become warnings).
+//!
+//! Shutdown: `request_stop` stops ingest and estimator at once; the RSI
+//! loop keeps answering until the bat is home and at rest (or the robot is
+//! silent, or never came), then ends; telemetry drains last.
+
+use std::io;
+use std::net::{IpAddr, SocketAddr, UdpSocket};
+use std::sync::atomic::{AtomicBool, AtomicU8, AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
+use std::thread::JoinHandle;
+
+use super::rt::{self, RtWarning};
+use super::telemetry::{
+    self, DatagramRecord, RECORDED_DATAGRAM, RECORDED_RSI, RsiRecord, Telemetry, TelemetrySink, TelemetrySummary,
+    TelemetryTx,
+};
+use crate::calib::Calibration;
+use crate::estimator::{Estimator, EstimatorConfig};
+use crate::ingest::{Accepted, Ingest, IngestCounters};
+use crate::motion::generator::Phase;
+use crate::rsi::server::{PlanReader, RsiServer, RsiSink, WaitStrategy, plan_slot};
+use crate::rsi::session::{RsiSession, SessionConfig, SessionEvent, SessionStats};
+use crate::runtime;
+use crate::time::{Duration, Instant};
+
+/// Capacity of the ingest → estimator ring, observations.
+pub const OBSERVATION_RING: usize = 1024;
+/// Largest tracker datagram read; longer ones are truncated (and malformed).
+pub const MAX_TRACKER_DATAGRAM: usize = 512;
+/// Receive timeout of the ingest socket: only for looking at the stop flag.
+pub const INGEST_POLL: std::time::Duration = std::time::Duration::from_millis(20);
+/// The estimator's idle wait when it blocks (it is unparked by ingest).
+pub const ESTIMATOR_PARK: std::time::Duration = std::time::Duration::from_millis(5);
+/// Once home after a stop request, keep answering this long before ending.
+pub const HOME_GRACE: Duration = Duration::from_millis(200);
+/// Longest drain after a stop request.
+pub const MAX_DRAIN: Duration = Duration::from_millis(5000);
+
+/// Per-thread core and real-time priority.
+#[derive(Copy, Clone, Debug, Default, PartialEq, Eq)]
+pub struct ThreadSpec {
+    pub core: Option<usize>,
+    pub priority: Option<i32>,
+}
+
+/// Everything the threads need, already validated.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RuntimeConfig {
+    pub tracker_bind: SocketAddr,
+    /// Only datagrams from this address are accepted (`None`: any).
+    pub tracker_source: Option<IpAddr>,
+    pub rsi_bind: SocketAddr,
+    /// Only requests from this address are answered (`None`: any).
+    pub controller_source: Option<IpAddr>,
+    pub realtime: bool,
+    pub ingest: ThreadSpec,
+    pub estimator: ThreadSpec,
+    pub rsi: ThreadSpec,
+    pub telemetry: ThreadSpec,
+    pub rsi_wait: WaitStrategy,
+    /// The estimator spins on its ring instead of parking.
+    pub estimator_busy_poll: bool,
+    /// Tracker noise σ per axis, m.
+    pub tracker_noise: f64,
+    pub tracker_fixed_latency: Duration,
+    pub sentype: String,
+    pub log_interval_s: f64,
+    /// Push the RSI bytes to telemetry (for the recording).
+    pub record_rsi: bool,
+}
+
+impl RuntimeConfig {
+    /// Everything on loopback with ephemeral ports, no pinning, no
+    /// real-time: for the demo, benches and tests.
+    pub fn loopback() -> Self {
+        let lo: SocketAddr = "127.0.0.1:0".parse().expect("literal");
+        RuntimeConfig {
+            tracker_bind: lo,
+            tracker_source: Some(lo.ip()),
+            rsi_bind: lo,
+            controller_source: Some(lo.ip()),
+            realtime: false,
+            ingest: ThreadSpec::default(),
+            estimator: ThreadSpec::default(),
+            rsi: ThreadSpec::default(),
+            telemetry: ThreadSpec::default(),
+            rsi_wait: WaitStrategy::Blocking,
+            estimator_busy_poll: false,
+            tracker_noise: 0.002,
+            tracker_fixed_latency: Duration::from_millis(2),
+            sentype: "ImFree".to_owned(),
+            log_interval_s: 10.0,
+            record_rsi: false,
+        }
+    }
+}
+
+/// How the RSI link stands, shared for the shutdown decision.
+#[derive(Copy, Clone, Debug, PartialEq, Eq)]
+#[repr(u8)]
+pub enum LinkState {
+    NoRobot = 0,
+    Moving = 1,
+    Home = 2,
+    Silent = 3,
+}
+
+/// What the daemon's run ended with.
+#[derive(Debug)]
+pub struct DaemonSummary {
+    pub telemetry: TelemetrySummary,
+    pub ingest: IngestCounters,
+    pub session: SessionStats,
+    pub warnings: Vec<RtWarning>,
+    /// The RSI loop ended with the bat home (or no robot was there).
+    pub ended_home: bool,
+}
+
+/// The running daemon.
+#[derive(Debug)]
+pub struct Daemon {
+    pub tracker_addr: SocketAddr,
+    pub rsi_addr: SocketAddr,
+    stop: Arc<AtomicBool>,
+    rsi_stop: Arc<AtomicBool>,
+    telemetry_stop: Arc<AtomicBool>,
+    link: Arc<AtomicU8>,
+    ingest: JoinHandle<IngestCounters>,
+    estimator: JoinHandle<()>,
+    rsi: JoinHandle<io::Result<SessionStats>>,
+    telemetry: JoinHandle<TelemetrySummary>,
+    warnings: Arc<Mutex<Vec<RtWarning>>>,
+}
+
+struct ObsItem {
+    accepted: Accepted,
+    arrival: Instant,
+}
+
+fn spawn<T: Send + 'static>(
+    name: &'static str,
+    spec: ThreadSpec,
+    realtime: bool,
+    warnings: &Arc<Mutex<Vec<RtWarning>>>,
+    f: impl FnOnce() -> T + Send + 'static,
+) -> io::Result<JoinHandle<T>> {
+    let warnings = warnings.clone();
+    std::thread::Builder::new().name(format!("topspin-{name}")).spawn(move || {
+        let refused = rt::setup_current(name, spec.core, if realtime { spec.priority } else { None });
+        if !refused.is_empty() {
+            warnings.lock().unwrap_or_else(|e| e.into_inner()).extend(refused);
+        }
+        f()
+    })
+}
+
+impl Daemon {
+    /// Binds the sockets and starts the threads. `sink` receives what the
+    /// telemetry thread sees (the recording).
+    pub fn start(cfg: &RuntimeConfig, cal: &Calibration, sink: Option<Box<dyn TelemetrySink>>) -> io::Result<Daemon> {
+        let warnings = Arc::new(Mutex::new(Vec::new()));
+        if cfg.realtime
+            && let Err(w) = rt::lock_memory()
+        {
+            warnings.lock().unwrap_or_else(|e| e.into_inner()).push(w);
+        }
+        let tracker_socket = UdpSocket::bind(cfg.tracker_bind)?;
+        tracker_socket.set_read_timeout(Some(INGEST_POLL))?;
+        let tracker_addr = tracker_socket.local_addr()?;
+        let session = RsiSession::new(SessionConfig::from_calibration(cal, &cfg.sentype))
+            .map_err(|e| io::Error::new(io::ErrorKind::InvalidInput, e.to_string()))?;
+        let server = RsiServer::bind(cfg.rsi_bind, session, cfg.rsi_wait)?;
+        let rsi_addr = server.local_addr()?;
+
+        let stop = Arc::new(AtomicBool::new(false));
+        let rsi_stop = Arc::new(AtomicBool::new(false));
+        let telemetry_stop = Arc::new(AtomicBool::new(false));
+        let link = Arc::new(AtomicU8::new(LinkState::NoRobot as u8));
+        let dropped = Arc::new(AtomicU64::new(0));
+        let ingest_counters = Arc::new(Mutex::new(IngestCounters::default()));
+        let (tx_ingest, rx_ingest) = telemetry::ring(&dropped);
+        let (tx_est, rx_est) = telemetry::ring(&dropped);
+        let (tx_rsi, rx_rsi) = telemetry::ring(&dropped);
+        let (obs_tx, obs_rx) = rtrb::RingBuffer::<ObsItem>::new(OBSERVATION_RING);
+        let (plan_tx, plan_rx) = plan_slot();
+
+        let estimator = {
+            let est = Estimator::new(cal, EstimatorConfig::default().with_noise(cfg.tracker_noise));
+            let stop = stop.clone();
+            let busy = cfg.estimator_busy_poll;
+            spawn("estimator", cfg.estimator, cfg.realtime, &warnings, move || {
+                estimator_loop(est, obs_rx, plan_tx, tx_est, &stop, busy)
+            })?
+        };
+        let ingest = {
+            let ing = Ingest::new(cfg.tracker_source, cfg.tracker_fixed_latency.0);
+            let stop = stop.clone();
+            let est_thread = estimator.thread().clone();
+            let shared = ingest_counters.clone();
+            spawn("ingest", cfg.ingest, cfg.realtime, &warnings, move || {
+                ingest_loop(ing, tracker_socket, obs_tx, tx_ingest, &stop, &est_thread, &shared)
+            })?
+        };
+        let rsi = {
+            let sink = RsiTelemetry {
+                tx: tx_rsi,
+                link: link.clone(),
+                record: cfg.record_rsi,
+                controller: cfg.controller_source,
+            };
+            let rsi_stop = rsi_stop.clone();
+            spawn("rsi", cfg.rsi, cfg.realtime, &warnings, move || rsi_loop(server, plan_rx, sink, &rsi_stop))?
+        };
+        let telemetry = {
+            let stop = telemetry_stop.clone();
+            let interval = cfg.log_interval_s;
+            spawn("telemetry", cfg.telemetry, false, &warnings, move || {
+                let ingest = move || *ingest_counters.lock().unwrap_or_else(|e| e.into_inner());
+                telemetry::run(vec![rx_ingest, rx_est, rx_rsi], &stop, &dropped, interval, sink, &ingest, &runtime::now)
+            })?
+        };
+        Ok(Daemon {
+            tracker_addr,
+            rsi_addr,
+            stop,
+            rsi_stop,
+            telemetry_stop,
+            link,
+            ingest,
+            estimator,
+            rsi,
+            telemetry,
+            warnings,
+        })
+    }
+
+    /// Real-time requests refused so far (the threads report at start).
+    pub fn warnings(&self) -> Vec<RtWarning> {
+        self.warnings.lock().unwrap_or_else(|e| e.into_inner()).clone()
+    }
+
+    pub fn link_state(&self) -> LinkState {
+        match self.link.load(Ordering::Acquire) {
+            1 => LinkState::Moving,
+            2 => LinkState::Home,
+            3 => LinkState::Silent,
+            _ => LinkState::NoRobot,
+        }
+    }
+
+    /// Stops taking balls; the RSI loop goes on until the bat is home.
+    pub fn request_stop(&self) {
+        self.stop.store(true, Ordering::Release);
+    }
+
+    /// Waits for the drain (bat home, robot silent or absent, at most
+    /// [`MAX_DRAIN`]) and for every thread; returns what they saw.
+    pub fn join(self) -> io::Result<DaemonSummary> {
+        self.request_stop();
+        let t0 = runtime::now();
+        let mut home_since: Option<Instant> = None;
+        let ended_home = loop {
+            let now = runtime::now();
+            match self.link_state() {
+                LinkState::NoRobot | LinkState::Silent => break true,
+                LinkState::Home => {
+                    let since = *home_since.get_or_insert(now);
+                    if now - since >= HOME_GRACE {
+                        break true;
+                    }
+                }
+                LinkState::Moving => home_since = None,
+            }
+            if now - t0 >= MAX_DRAIN {
+                break false;
+            }
+            std::thread::sleep(std::time::Duration::from_millis(2));
+        };
+        self.rsi_stop.store(true, Ordering::Release);
+        let ingest = self.ingest.join().map_err(|_| io::Error::other("ingest thread panicked"))?;
+        self.estimator.join().map_err(|_| io::Error::other("estimator thread panicked"))?;
+        let session = self.rsi.join().map_err(|_| io::Error::other("rsi thread panicked"))??;
+        self.telemetry_stop.store(true, Ordering::Release);
+        let telemetry = self.telemetry.join().map_err(|_| io::Error::other("telemetry thread panicked"))?;
+        let warnings = self.warnings.lock().unwrap_or_else(|e| e.into_inner()).clone();
+        Ok(DaemonSummary { telemetry, ingest, session, warnings, ended_home })
+    }
+}
+
+fn ingest_loop(
+    mut ingest: Ingest,
+    socket: UdpSocket,
+    mut obs: rtrb::Producer<ObsItem>,
+    mut tx: TelemetryTx,
+    stop: &AtomicBool,
+    estimator: &std::thread::Thread,
+    shared: &Mutex<IngestCounters>,
+) -> IngestCounters {
+    let mut buf = [0u8; MAX_TRACKER_DATAGRAM];
+    let mut since_publish = 0u32;
+    while !stop.load(Ordering::Acquire) {
+        let (n, from) = match socket.recv_from(&mut buf) {
+            Ok(x) => x,
+            Err(e) if matches!(e.kind(), io::ErrorKind::WouldBlock | io::ErrorKind::TimedOut) => continue,
+            Err(_) => continue, // e.g. ICMP errors surfacing on a UDP socket: nothing to do
+        };
+        let arrival = runtime::now();
+        let outcome = ingest.accept(&buf[..n], from, arrival);
+        if let Ok(accepted) = outcome {
+            // A full ring means the estimator fell behind: the newest wins next time.
+            let _ = obs.push(ObsItem { accepted, arrival });
+            estimator.unpark();
+        }
+        let mut bytes = [0u8; RECORDED_DATAGRAM];
+        let kept = n.min(RECORDED_DATAGRAM);
+        bytes[..kept].copy_from_slice(&buf[..kept]);
+        tx.push(Telemetry::Datagram(DatagramRecord {
+            arrival,
+            from,
+            len: n.min(u16::MAX as usize) as u16,
+            bytes,
+            outcome: outcome.map(|a| a.seq),
+        }));
+        // Share the counters with telemetry now and then (try_lock: never wait).
+        since_publish += 1;
+        if since_publish >= 64
+            && let Ok(mut g) = shared.try_lock()
+        {
+            *g = ingest.counters();
+            since_publish = 0;
+        }
+    }
+    let c = ingest.counters();
+    *shared.lock().unwrap_or_else(|e| e.into_inner()) = c;
+    c
+}
+
+fn estimator_loop(
+    mut est: Estimator,
+    mut obs: rtrb::Consumer<ObsItem>,
+    mut plans: crate::rsi::server::PlanWriter,
+    mut tx: TelemetryTx,
+    stop: &AtomicBool,
+    busy_poll: bool,
+) {
+    // No idle `poll`: a silent track ends at the next observation (by
+    // capture time), so a replay of the recorded datagrams makes the same
+    // plans bit for bit.
+    while !stop.load(Ordering::Acquire) {
+        let mut any = false;
+        while let Ok(item) = obs.pop() {
+            any = true;
+            let out = est.observe(item.accepted.capture, item.accepted.pos);
+            if let Some(plan) = out.plan {
+                plans.publish(plan);
+                tx.push(Telemetry::Plan { plan, arrival: item.arrival, published: runtime::now() });
+            }
+            for e in out.events {
+                tx.push(Telemetry::Estimator(e));
+            }
+        }
+        if !any {
+            if busy_poll {
+                std::hint::spin_loop();
+            } else {
+                std::thread::park_timeout(ESTIMATOR_PARK);
+            }
+        }
+    }
+}
+
+struct RsiTelemetry {
+    tx: TelemetryTx,
+    link: Arc<AtomicU8>,
+    record: bool,
+    controller: Option<IpAddr>,
+}
+
+impl RsiSink for RsiTelemetry {
+    fn event(&mut self, e: SessionEvent) {
+        let state = match e {
+            SessionEvent::Started { .. } => Some(LinkState::Home),
+            SessionEvent::RobotSilent => Some(LinkState::Silent),
+            SessionEvent::PhaseChanged(Phase::Hold) => Some(LinkState::Home),
+            SessionEvent::PhaseChanged(_) => Some(LinkState::Moving),
+            _ => None,
+        };
+        if let Some(s) = state {
+            self.link.store(s as u8, Ordering::Release);
+        }
+        self.tx.push(Telemetry::Rsi(e));
+    }
+
+    fn exchange(&mut self, arrival: Instant, request: &[u8], answer: &[u8], sent: Instant) {
+        self.tx.push(Telemetry::Answer { arrival, sent });
+        if self.record {
+            let mut r = RsiRecord {
+                arrival,
+                sent,
+                request_len: request.len().min(RECORDED_RSI) as u16,
+                request: [0; RECORDED_RSI],
+                answer_len: answer.len().min(RECORDED_RSI) as u16,
+                answer: [0; RECORDED_RSI],
+            };
+            r.request[..r.request_len as usize].copy_from_slice(&request[..r.request_len as usize]);
+            r.answer[..r.answer_len as usize].copy_from_slice(&answer[..r.answer_len as usize]);
+            self.tx.push(Telemetry::RsiBytes(r));
+        }
+    }
+}
+
+fn rsi_loop(
+    mut server: RsiServer,
+    mut plans: PlanReader,
+    sink: RsiTelemetry,
+    stop: &AtomicBool,
+) -> io::Result<SessionStats> {
+    if let Some(ip) = sink.controller {
+        server.allow_only(ip);
+    }
+    server.run(stop, &mut plans, sink)?;
+    Ok(*server.session().stats())
+}

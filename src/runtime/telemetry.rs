@@ -1,0 +1,273 @@
+//! Telemetry: the fixed-size events the hot threads push through their SPSC
+//! rings, and the cold thread that drains them — counters, latency
+//! histograms (hdrhistogram), periodic logs (tracing), and an optional
+//! sink (the session recording). Hot threads never format, log or wait:
+//! a full ring drops the event and counts it.
+
+use std::net::SocketAddr;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+
+use hdrhistogram::Histogram;
+use rtrb::{Consumer, Producer};
+
+use crate::estimator::EstimatorEvent;
+use crate::ingest::{Dropped, IngestCounters};
+use crate::plan::StrikePlan;
+use crate::rsi::session::SessionEvent;
+use crate::time::Instant;
+
+/// Capacity of each thread's telemetry ring, events.
+pub const TELEMETRY_RING: usize = 8192;
+/// Bytes of each received datagram kept for the recording.
+pub const RECORDED_DATAGRAM: usize = 64;
+/// Bytes of each RSI request and answer kept for the recording.
+pub const RECORDED_RSI: usize = 1024;
+
+/// One received tracker datagram.
+#[derive(Copy, Clone, Debug)]
+pub struct DatagramRecord {
+    pub arrival: Instant,
+    pub from: SocketAddr,
+    /// Length on the wire (may exceed what is kept).
+    pub len: u16,
+    pub bytes: [u8; RECORDED_DATAGRAM],
+    /// The sequence number if accepted, otherwise why it was dropped.
+    pub outcome: Result<u32, Dropped>,
+}
+
+impl DatagramRecord {
+    /// The kept bytes.
+    pub fn kept(&self) -> &[u8] {
+        &self.bytes[..(self.len as usize).min(RECORDED_DATAGRAM)]
+    }
+}
+
+/// One RSI exchange with its bytes (pushed only when recording).
+#[derive(Copy, Clone, Debug)]
+pub struct RsiRecord {
+    pub arrival: Instant,
+    pub sent: Instant,
+    pub request_len: u16,
+    pub request: [u8; RECORDED_RSI],
+    pub answer_len: u16,
+    pub answer: [u8; RECORDED_RSI],
+}
+
+/// An event from a hot thread.
+#[derive(Copy, Clone, Debug)]
+pub enum Telemetry {
+    Datagram(DatagramRecord),
+    Estimator(EstimatorEvent),
+    /// A plan published; `arrival` of the observation that made it.
+    Plan {
+        plan: StrikePlan,
+        arrival: Instant,
+        published: Instant,
+    },
+    Rsi(SessionEvent),
+    /// One RSI answer: request arrival and answer sent.
+    Answer {
+        arrival: Instant,
+        sent: Instant,
+    },
+    RsiBytes(RsiRecord),
+}
+
+/// A hot thread's end of its telemetry ring.
+#[derive(Debug)]
+pub struct TelemetryTx {
+    producer: Producer<Telemetry>,
+    dropped: Arc<AtomicU64>,
+}
+
+impl TelemetryTx {
+    /// Pushes `e`; a full ring drops it (counted).
+    #[inline]
+    pub fn push(&mut self, e: Telemetry) {
+        if self.producer.push(e).is_err() {
+            self.dropped.fetch_add(1, Ordering::Relaxed);
+        }
+    }
+}
+
+/// Where the telemetry thread hands what it sees (the recording).
+pub trait TelemetrySink: Send {
+    fn datagram(&mut self, _d: &DatagramRecord) {}
+    fn plan(&mut self, _p: &StrikePlan) {}
+    fn rsi(&mut self, _r: &RsiRecord) {}
+    /// Called at each log interval and at the end.
+    fn counters(&mut self, _json: &serde_json::Value, _at: Instant) {}
+    fn flush(&mut self) {}
+}
+
+/// What the telemetry thread has seen; returned at the end.
+#[derive(Debug)]
+pub struct TelemetrySummary {
+    /// Observation arrival → plan published, µs.
+    pub obs_to_plan_us: Histogram<u64>,
+    /// RSI request arrival → answer sent, µs.
+    pub rsi_answer_us: Histogram<u64>,
+    /// The last plan of each trajectory, in order.
+    pub last_plans: Vec<StrikePlan>,
+    pub plans: u64,
+    pub datagrams: u64,
+    pub trajectories: u64,
+    pub controller_late: u64,
+    pub rsi_events: u64,
+    pub telemetry_dropped: u64,
+    pub ingest: IngestCounters,
+}
+
+impl TelemetrySummary {
+    fn new() -> Self {
+        let h = || Histogram::new_with_bounds(1, 60_000_000, 3).expect("valid bounds");
+        TelemetrySummary {
+            obs_to_plan_us: h(),
+            rsi_answer_us: h(),
+            last_plans: Vec::new(),
+            plans: 0,
+            datagrams: 0,
+            trajectories: 0,
+            controller_late: 0,
+            rsi_events: 0,
+            telemetry_dropped: 0,
+            ingest: IngestCounters::default(),
+        }
+    }
+
+    /// p50/p99/p99.9/max of a histogram as JSON.
+    pub fn percentiles(h: &Histogram<u64>) -> serde_json::Value {
+        serde_json::json!({
+            "p50": h.value_at_quantile(0.5),
+            "p99": h.value_at_quantile(0.99),
+            "p999": h.value_at_quantile(0.999),
+            "max": h.max(),
+            "n": h.len(),
+        })
+    }
+
+    pub fn to_json(&self) -> serde_json::Value {
+        serde_json::json!({
+            "datagrams": self.datagrams,
+            "plans": self.plans,
+            "trajectories": self.trajectories,
+            "controller_late": self.controller_late,
+            "telemetry_dropped": self.telemetry_dropped,
+            "ingest": self.ingest,
+            "latency_us": {
+                "obs_to_plan": Self::percentiles(&self.obs_to_plan_us),
+                "rsi_answer": Self::percentiles(&self.rsi_answer_us),
+            },
+        })
+    }
+}
+
+/// Creates one ring: the hot end and the cold end.
+pub fn ring(dropped: &Arc<AtomicU64>) -> (TelemetryTx, Consumer<Telemetry>) {
+    let (producer, consumer) = rtrb::RingBuffer::new(TELEMETRY_RING);
+    (TelemetryTx { producer, dropped: dropped.clone() }, consumer)
+}
+
+fn us(from: Instant, to: Instant) -> u64 {
+    ((to - from).0 / 1000).max(1)
+}
+
+/// The telemetry thread's loop: drains `rings` until `stop` (then once
+/// more), logging every `log_interval` s of the clock `now`.
+pub fn run(
+    mut rings: Vec<Consumer<Telemetry>>,
+    stop: &AtomicBool,
+    dropped: &AtomicU64,
+    log_interval: f64,
+    mut sink: Option<Box<dyn TelemetrySink>>,
+    ingest: &dyn Fn() -> IngestCounters,
+    now: &dyn Fn() -> Instant,
+) -> TelemetrySummary {
+    let mut s = TelemetrySummary::new();
+    let mut next_log = now().as_secs_f64() + log_interval;
+    loop {
+        let stopping = stop.load(Ordering::Acquire);
+        let mut any = false;
+        for ring in rings.iter_mut() {
+            while let Ok(e) = ring.pop() {
+                any = true;
+                handle(&mut s, &e, &mut sink);
+            }
+        }
+        let t = now();
+        if t.as_secs_f64() >= next_log || stopping {
+            next_log = t.as_secs_f64() + log_interval;
+            s.telemetry_dropped = dropped.load(Ordering::Relaxed);
+            s.ingest = ingest();
+            let json = s.to_json();
+            tracing::info!(target: "topspin::telemetry", "{json}");
+            if let Some(k) = sink.as_deref_mut() {
+                k.counters(&json, t);
+                k.flush();
+            }
+        }
+        if stopping {
+            return s;
+        }
+        if !any {
+            std::thread::sleep(std::time::Duration::from_millis(2));
+        }
+    }
+}
+
+fn handle(s: &mut TelemetrySummary, e: &Telemetry, sink: &mut Option<Box<dyn TelemetrySink>>) {
+    match e {
+        Telemetry::Datagram(d) => {
+            s.datagrams += 1;
+            if let Err(reason) = d.outcome {
+                tracing::debug!(target: "topspin::ingest", from = %d.from, ?reason, "datagram dropped");
+            }
+            if let Some(k) = sink {
+                k.datagram(d);
+            }
+        }
+        Telemetry::Estimator(ev) => match ev {
+            EstimatorEvent::Started { .. } => {
+                s.trajectories += 1;
+                tracing::info!(target: "topspin::estimator", ?ev);
+            }
+            EstimatorEvent::Withheld { .. } | EstimatorEvent::Rejected { .. } => {
+                tracing::debug!(target: "topspin::estimator", ?ev)
+            }
+            _ => tracing::info!(target: "topspin::estimator", ?ev),
+        },
+        Telemetry::Plan { plan, arrival, published } => {
+            s.plans += 1;
+            let _ = s.obs_to_plan_us.record(us(*arrival, *published));
+            match s.last_plans.last_mut() {
+                Some(last) if last.trajectory == plan.trajectory => *last = *plan,
+                _ => s.last_plans.push(*plan),
+            }
+            if let Some(k) = sink {
+                k.plan(plan);
+            }
+        }
+        Telemetry::Rsi(ev) => {
+            s.rsi_events += 1;
+            match ev {
+                SessionEvent::ControllerLate { delay } => {
+                    s.controller_late = *delay;
+                    tracing::warn!(target: "topspin::rsi", delay, "controller counted late answers");
+                }
+                SessionEvent::Malformed(_) | SessionEvent::SlowAnswer { .. } | SessionEvent::IpocGap { .. } => {
+                    tracing::warn!(target: "topspin::rsi", ?ev)
+                }
+                _ => tracing::info!(target: "topspin::rsi", ?ev),
+            }
+        }
+        Telemetry::Answer { arrival, sent } => {
+            let _ = s.rsi_answer_us.record(us(*arrival, *sent));
+        }
+        Telemetry::RsiBytes(r) => {
+            if let Some(k) = sink {
+                k.rsi(r);
+            }
+        }
+    }
+}
