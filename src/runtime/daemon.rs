@@ -17,8 +17,8 @@ use std::thread::JoinHandle;
 
 use super::rt::{self, RtWarning};
 use super::telemetry::{
-    self, DatagramRecord, RECORDED_DATAGRAM, RECORDED_RSI, RsiRecord, Telemetry, TelemetrySink, TelemetrySummary,
-    TelemetryTx,
+    self, DatagramRecord, RECORDED_DATAGRAM, RECORDED_RSI, RSI_BYTES_RING, RsiRecord, TELEMETRY_RING, Telemetry,
+    TelemetryInputs, TelemetrySink, TelemetrySummary, TelemetryTx,
 };
 use crate::calib::Calibration;
 use crate::estimator::{Estimator, EstimatorConfig};
@@ -184,9 +184,15 @@ impl Daemon {
         let link = Arc::new(AtomicU8::new(LinkState::NoRobot as u8));
         let dropped = Arc::new(AtomicU64::new(0));
         let ingest_counters = Arc::new(Mutex::new(IngestCounters::default()));
-        let (tx_ingest, rx_ingest) = telemetry::ring(&dropped);
-        let (tx_est, rx_est) = telemetry::ring(&dropped);
-        let (tx_rsi, rx_rsi) = telemetry::ring(&dropped);
+        let (tx_ingest, rx_ingest) = telemetry::ring(&dropped, TELEMETRY_RING);
+        let (tx_est, rx_est) = telemetry::ring(&dropped, TELEMETRY_RING);
+        let (tx_rsi, rx_rsi) = telemetry::ring(&dropped, TELEMETRY_RING);
+        let (bytes_tx, bytes_rx) = if cfg.record_rsi {
+            let (tx, rx) = telemetry::ring(&dropped, RSI_BYTES_RING);
+            (Some(tx), Some(rx))
+        } else {
+            (None, None)
+        };
         let (obs_tx, obs_rx) = rtrb::RingBuffer::<ObsItem>::new(OBSERVATION_RING);
         let (plan_tx, plan_rx) = plan_slot();
 
@@ -208,12 +214,8 @@ impl Daemon {
             })?
         };
         let rsi = {
-            let sink = RsiTelemetry {
-                tx: tx_rsi,
-                link: link.clone(),
-                record: cfg.record_rsi,
-                controller: cfg.controller_source,
-            };
+            let sink =
+                RsiTelemetry { tx: tx_rsi, link: link.clone(), bytes: bytes_tx, controller: cfg.controller_source };
             let rsi_stop = rsi_stop.clone();
             spawn("rsi", cfg.rsi, cfg.realtime, &warnings, move || rsi_loop(server, plan_rx, sink, &rsi_stop))?
         };
@@ -222,7 +224,13 @@ impl Daemon {
             let interval = cfg.log_interval_s;
             spawn("telemetry", cfg.telemetry, false, &warnings, move || {
                 let ingest = move || *ingest_counters.lock().unwrap_or_else(|e| e.into_inner());
-                telemetry::run(vec![rx_ingest, rx_est, rx_rsi], &stop, &dropped, interval, sink, &ingest, &runtime::now)
+                let inputs = TelemetryInputs {
+                    rings: vec![rx_ingest, rx_est, rx_rsi],
+                    rsi_bytes: bytes_rx,
+                    log_interval: interval,
+                    sink,
+                };
+                telemetry::run(inputs, &stop, &dropped, &ingest, &runtime::now)
             })?
         };
         Ok(Daemon {
@@ -378,7 +386,8 @@ fn estimator_loop(
 struct RsiTelemetry {
     tx: TelemetryTx,
     link: Arc<AtomicU8>,
-    record: bool,
+    /// The bytes of every exchange, when recording.
+    bytes: Option<TelemetryTx<RsiRecord>>,
     controller: Option<IpAddr>,
 }
 
@@ -399,7 +408,7 @@ impl RsiSink for RsiTelemetry {
 
     fn exchange(&mut self, arrival: Instant, request: &[u8], answer: &[u8], sent: Instant) {
         self.tx.push(Telemetry::Answer { arrival, sent });
-        if self.record {
+        if let Some(bytes) = self.bytes.as_mut() {
             let mut r = RsiRecord {
                 arrival,
                 sent,
@@ -410,7 +419,7 @@ impl RsiSink for RsiTelemetry {
             };
             r.request[..r.request_len as usize].copy_from_slice(&request[..r.request_len as usize]);
             r.answer[..r.answer_len as usize].copy_from_slice(&answer[..r.answer_len as usize]);
-            self.tx.push(Telemetry::RsiBytes(r));
+            bytes.push(r);
         }
     }
 }

@@ -71,20 +71,22 @@ pub enum Telemetry {
         arrival: Instant,
         sent: Instant,
     },
-    RsiBytes(RsiRecord),
 }
 
-/// A hot thread's end of its telemetry ring.
+/// Capacity of the ring of RSI bytes (recording only), exchanges.
+pub const RSI_BYTES_RING: usize = 1024;
+
+/// A hot thread's end of a telemetry ring.
 #[derive(Debug)]
-pub struct TelemetryTx {
-    producer: Producer<Telemetry>,
+pub struct TelemetryTx<T = Telemetry> {
+    producer: Producer<T>,
     dropped: Arc<AtomicU64>,
 }
 
-impl TelemetryTx {
+impl<T> TelemetryTx<T> {
     /// Pushes `e`; a full ring drops it (counted).
     #[inline]
-    pub fn push(&mut self, e: Telemetry) {
+    pub fn push(&mut self, e: T) {
         if self.producer.push(e).is_err() {
             self.dropped.fetch_add(1, Ordering::Relaxed);
         }
@@ -163,9 +165,9 @@ impl TelemetrySummary {
     }
 }
 
-/// Creates one ring: the hot end and the cold end.
-pub fn ring(dropped: &Arc<AtomicU64>) -> (TelemetryTx, Consumer<Telemetry>) {
-    let (producer, consumer) = rtrb::RingBuffer::new(TELEMETRY_RING);
+/// Creates one ring of `capacity`: the hot end and the cold end.
+pub fn ring<T>(dropped: &Arc<AtomicU64>, capacity: usize) -> (TelemetryTx<T>, Consumer<T>) {
+    let (producer, consumer) = rtrb::RingBuffer::new(capacity);
     (TelemetryTx { producer, dropped: dropped.clone() }, consumer)
 }
 
@@ -173,17 +175,27 @@ fn us(from: Instant, to: Instant) -> u64 {
     ((to - from).0 / 1000).max(1)
 }
 
-/// The telemetry thread's loop: drains `rings` until `stop` (then once
+/// What the telemetry thread drains and where it hands it.
+#[allow(missing_debug_implementations)] // holds a `dyn TelemetrySink`
+pub struct TelemetryInputs {
+    pub rings: Vec<Consumer<Telemetry>>,
+    /// RSI bytes, when recording.
+    pub rsi_bytes: Option<Consumer<RsiRecord>>,
+    /// Seconds between periodic logs.
+    pub log_interval: f64,
+    pub sink: Option<Box<dyn TelemetrySink>>,
+}
+
+/// The telemetry thread's loop: drains the rings until `stop` (then once
 /// more), logging every `log_interval` s of the clock `now`.
 pub fn run(
-    mut rings: Vec<Consumer<Telemetry>>,
+    inputs: TelemetryInputs,
     stop: &AtomicBool,
     dropped: &AtomicU64,
-    log_interval: f64,
-    mut sink: Option<Box<dyn TelemetrySink>>,
     ingest: &dyn Fn() -> IngestCounters,
     now: &dyn Fn() -> Instant,
 ) -> TelemetrySummary {
+    let TelemetryInputs { mut rings, mut rsi_bytes, log_interval, mut sink } = inputs;
     let mut s = TelemetrySummary::new();
     let mut next_log = now().as_secs_f64() + log_interval;
     loop {
@@ -193,6 +205,14 @@ pub fn run(
             while let Ok(e) = ring.pop() {
                 any = true;
                 handle(&mut s, &e, &mut sink);
+            }
+        }
+        if let Some(ring) = rsi_bytes.as_mut() {
+            while let Ok(r) = ring.pop() {
+                any = true;
+                if let Some(k) = sink.as_mut() {
+                    k.rsi(&r);
+                }
             }
         }
         let t = now();
@@ -263,11 +283,6 @@ fn handle(s: &mut TelemetrySummary, e: &Telemetry, sink: &mut Option<Box<dyn Tel
         }
         Telemetry::Answer { arrival, sent } => {
             let _ = s.rsi_answer_us.record(us(*arrival, *sent));
-        }
-        Telemetry::RsiBytes(r) => {
-            if let Some(k) = sink {
-                k.rsi(r);
-            }
         }
     }
 }
