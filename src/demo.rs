@@ -121,6 +121,11 @@ pub struct DemoReport {
     pub hit_err_mm_median: f64,
     pub latency_us: Latencies,
     pub ended_home: bool,
+    /// Plans the RSI loop took that arrive late (and the worst, ms), and
+    /// plans it refused.
+    pub plans_late: u64,
+    pub late_by_max_ms: f64,
+    pub plans_rejected: u64,
     pub warnings: Vec<String>,
     pub per_ball: Vec<BallVerdict>,
 }
@@ -259,6 +264,9 @@ fn judge(
         hit_err_mm_median: Summary::of(&hit_err).median,
         latency_us: Latencies::of(&summary.telemetry),
         ended_home: summary.ended_home,
+        plans_late: summary.telemetry.plans_late,
+        late_by_max_ms: summary.telemetry.late_by_max_ms,
+        plans_rejected: summary.telemetry.plans_rejected,
         warnings: summary.warnings.iter().map(|w| w.to_string()).collect(),
         per_ball,
     }

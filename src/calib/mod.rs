@@ -173,6 +173,23 @@ impl Calibration {
         let (text, path) = read_or_default(dir, "robot.toml", DEFAULT_ROBOT)?;
         let robot = parse::<RobotFile>(&text, &path)?;
         robot.validate().map_err(|b| CalibError::OutOfRange { path: path.clone(), key: b.key, value: b.value })?;
+        // The hitting window must lie inside the robot's workspace.
+        for (y, z) in [(strike.window_y[0], strike.window_z[0]), (strike.window_y[1], strike.window_z[1])] {
+            let p = robot.t_to_b(crate::physics::Vec3::new(strike.hit_plane_x, y, z));
+            if (0..3).any(|i| p[i] < robot.workspace.min_xyz_m[i] || p[i] > robot.workspace.max_xyz_m[i]) {
+                return Err(CalibError::OutOfRange {
+                    path: path.clone(),
+                    key: "strike.window_y/window_z (outside robot workspace)",
+                    value: if (0..3)
+                        .any(|i| i == 1 && (p[1] < robot.workspace.min_xyz_m[1] || p[1] > robot.workspace.max_xyz_m[1]))
+                    {
+                        y
+                    } else {
+                        z
+                    },
+                });
+            }
+        }
         // The hitting plane must cross the robot's workspace.
         let x_b = robot.t_to_b(crate::physics::Vec3::new(strike.hit_plane_x, 0.0, 0.0)).x;
         if !(robot.workspace.min_xyz_m[0]..=robot.workspace.max_xyz_m[0]).contains(&x_b) {

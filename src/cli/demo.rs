@@ -133,6 +133,11 @@ pub fn table(r: &DemoReport) -> String {
         l.obs_to_plan.p999,
         l.obs_to_plan.max
     );
+    let _ = writeln!(
+        out,
+        "plans taken late: {} (worst {:.1} ms), refused: {}",
+        r.plans_late, r.late_by_max_ms, r.plans_rejected
+    );
     for w in &r.warnings {
         let _ = writeln!(out, "warning: {w}");
     }

@@ -30,7 +30,7 @@ use ekf::{Ekf, EkfNoise, Update};
 pub use stroke::Withheld;
 
 /// Observations collected before a candidate becomes a track.
-pub const ACQUIRE_LEN: usize = 12;
+pub const ACQUIRE_LEN: usize = 8;
 /// Capacity of the pre-bounce window the spin is refitted over (≈ 1 s at
 /// 250 Hz: longer than any flight to the bounce).
 pub const WINDOW_CAP: usize = 256;

@@ -42,14 +42,18 @@ pub const WALL_MARGIN_M: f64 = 0.01;
 
 /// Arrival this much after the hitting time counts as on time, s.
 pub const LATE_TOLERANCE_S: f64 = 0.0005;
-/// A refinement of the same ball (closer than this to the current target,
-/// per axis, m; and in time, s) that would arrive late is not taken: near
-/// the hit the axes are in their final, limit-bound motion, and arriving
-/// 20–35 ms late (Ruckig's answer to even a millimetre's change there)
-/// misses a ball moving at several m/s by far more than the refinement
-/// gains. Early refinements always arrive on time and are taken.
-pub const KEEP_MAX_DP_M: f64 = 0.05;
+/// A refinement of the same ball (within this of the current target in
+/// time, s, and per axis, m) that would arrive late is weighed against the
+/// current, on-time stroke: near the hit the axes are in their final,
+/// limit-bound motion, and Ruckig answers even a millimetre's change with
+/// arriving 20–35 ms late. Arriving `late_by` late misses a ball crossing
+/// at [`BALL_SPEED_AT_HIT`] by about `late_by × speed`; keeping the old
+/// stroke misses by the refinement's change. The smaller miss wins. Early
+/// refinements arrive on time and are always taken.
 pub const KEEP_MAX_DT_S: f64 = 0.010;
+pub const KEEP_MAX_DP_M: f64 = 0.15;
+/// Typical ball speed at the hitting plane (after the bounce), m/s.
+pub const BALL_SPEED_AT_HIT: f64 = 4.0;
 /// Duration nudges tried when Ruckig misses the hitting time, s.
 const RETRY_NUDGES_S: [f64; 4] = [-0.0003, 0.0003, -0.0007, 0.0007];
 
@@ -291,10 +295,12 @@ impl StrokeGenerator {
             && old.hit_time > self.t_last
             && (old.hit_time - target.hit_time).abs() <= KEEP_MAX_DT_S
             && (0..3).all(|i| (old.pose[i] - target.pose[i]).abs() <= KEEP_MAX_DP_M)
+            && (0..3).map(|i| (old.pose[i] - target.pose[i]).powi(2)).sum::<f64>().sqrt() <= late_by * BALL_SPEED_AT_HIT
         {
             std::mem::swap(&mut self.traj, &mut self.spare);
             self.t0 = old_t0;
             self.kept += 1;
+            self.late_by = 0.0;
             return Ok(self.target.as_ref().expect("old target"));
         }
         self.late_by = late_by;

@@ -42,6 +42,11 @@ pub const HOME_GRACE: Duration = Duration::from_millis(200);
 /// Longest drain after a stop request.
 pub const MAX_DRAIN: Duration = Duration::from_millis(5000);
 
+/// Called first thing on every daemon thread with its role ("ingest",
+/// "estimator", "rsi", "telemetry"): a seam for tests (the counting
+/// allocator marks the hot threads) and profilers. Unset: nothing happens.
+pub static THREAD_START_HOOK: std::sync::OnceLock<fn(&'static str)> = std::sync::OnceLock::new();
+
 /// Per-thread core and real-time priority.
 #[derive(Copy, Clone, Debug, Default, PartialEq, Eq)]
 pub struct ThreadSpec {
@@ -152,6 +157,9 @@ fn spawn<T: Send + 'static>(
 ) -> io::Result<JoinHandle<T>> {
     let warnings = warnings.clone();
     std::thread::Builder::new().name(format!("topspin-{name}")).spawn(move || {
+        if let Some(hook) = THREAD_START_HOOK.get() {
+            hook(name);
+        }
         let refused = rt::setup_current(name, spec.core, if realtime { spec.priority } else { None });
         if !refused.is_empty() {
             warnings.lock().unwrap_or_else(|e| e.into_inner()).extend(refused);

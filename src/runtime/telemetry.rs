@@ -117,6 +117,11 @@ pub struct TelemetrySummary {
     pub trajectories: u64,
     pub controller_late: u64,
     pub rsi_events: u64,
+    /// Plans the RSI loop took although they arrive late, and the worst.
+    pub plans_late: u64,
+    pub late_by_max_ms: f64,
+    /// Plans the RSI loop refused.
+    pub plans_rejected: u64,
     pub telemetry_dropped: u64,
     pub ingest: IngestCounters,
 }
@@ -133,6 +138,9 @@ impl TelemetrySummary {
             trajectories: 0,
             controller_late: 0,
             rsi_events: 0,
+            plans_late: 0,
+            late_by_max_ms: 0.0,
+            plans_rejected: 0,
             telemetry_dropped: 0,
             ingest: IngestCounters::default(),
         }
@@ -155,6 +163,9 @@ impl TelemetrySummary {
             "plans": self.plans,
             "trajectories": self.trajectories,
             "controller_late": self.controller_late,
+            "plans_late": self.plans_late,
+            "late_by_max_ms": self.late_by_max_ms,
+            "plans_rejected": self.plans_rejected,
             "telemetry_dropped": self.telemetry_dropped,
             "ingest": self.ingest,
             "latency_us": {
@@ -271,6 +282,16 @@ fn handle(s: &mut TelemetrySummary, e: &Telemetry, sink: &mut Option<Box<dyn Tel
         Telemetry::Rsi(ev) => {
             s.rsi_events += 1;
             match ev {
+                SessionEvent::PlanAccepted { late_by, .. } if late_by.0 > 0 => {
+                    s.plans_late += 1;
+                    s.late_by_max_ms = s.late_by_max_ms.max(late_by.as_secs_f64() * 1e3);
+                    tracing::debug!(target: "topspin::rsi", ?ev);
+                }
+                SessionEvent::PlanRejected { .. } => {
+                    s.plans_rejected += 1;
+                    tracing::debug!(target: "topspin::rsi", ?ev);
+                }
+                SessionEvent::PlanAccepted { .. } => {}
                 SessionEvent::ControllerLate { delay } => {
                     s.controller_late = *delay;
                     tracing::warn!(target: "topspin::rsi", delay, "controller counted late answers");

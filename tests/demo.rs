@@ -1,0 +1,37 @@
+//! `topspin demo --balls 30` end to end (the real binary): simulated
+//! tracker at 2 mm noise, daemon threads, mock KR C4 at 4 ms. At least 95 %
+//! of the reachable balls hit, zero late RSI answers, the bat home at the
+//! end, and the JSON of issue 5.
+
+use std::process::Command;
+
+#[test]
+fn thirty_balls_hit_with_no_late_answers() {
+    let out = Command::new(env!("CARGO_BIN_EXE_topspin"))
+        .args(["demo", "--balls", "30", "--seed", "7", "--json"])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let r: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    for key in ["balls", "hits", "hit_rate", "late_rsi_answers", "spin_err_pct_median", "hit_err_mm_median"] {
+        assert!(r.get(key).is_some(), "missing {key}");
+    }
+    for h in ["rsi_answer", "obs_to_plan"] {
+        for q in ["p50", "p99", "p999", "max"] {
+            assert!(r["latency_us"][h][q].as_u64().is_some(), "missing latency_us.{h}.{q}");
+        }
+    }
+    eprintln!(
+        "demo: {} of {} reachable hit, late {}, spin err {:.2}%, hit err {:.1} mm",
+        r["hits"],
+        r["reachable"],
+        r["late_rsi_answers"],
+        r["spin_err_pct_median"].as_f64().unwrap(),
+        r["hit_err_mm_median"].as_f64().unwrap()
+    );
+    assert_eq!(r["balls"], 30);
+    assert!(r["reachable"].as_u64().unwrap() >= 20, "{}", r["reachable"]);
+    assert!(r["hit_rate"].as_f64().unwrap() >= 0.95, "hit rate {}", r["hit_rate"]);
+    assert_eq!(r["late_rsi_answers"], 0);
+    assert_eq!(r["ended_home"], true);
+}
