@@ -20,16 +20,26 @@
 //! - [`calib`]: the calibration files in `calib/`.
 //! - [`data`]: real recorded trajectories (MPI launcher set), their frame,
 //!   and the real-data evaluation and calibration harness.
+//! - [`logo`]: spin from the ball's printed logo in ceiling-camera crops
+//!   (background subtraction, circular-segment correction, rotation fit).
+//! - [`render`]: the ceiling-camera renderer, labelled synthetic crops.
+//! - [`camera_calib`]: the ceiling camera's calibration (`calib/camera.toml`).
 //! - [`cli`]: the `topspin` command line.
 
 pub mod calib;
+/// The ceiling camera's calibration; the file lives beside the other
+/// calibration files and joins [`calib`] as `calib::camera` on merge.
+#[path = "calib/camera.rs"]
+pub mod camera_calib;
 pub mod cli;
 pub mod data;
 pub mod estimator;
 pub mod eval;
 pub mod fit;
+pub mod logo;
 pub mod physics;
 pub mod plan;
+pub mod render;
 pub mod sim;
 pub mod time;
 pub mod wire;

@@ -6,6 +6,8 @@ use clap::{Parser, Subcommand};
 
 pub mod eval;
 pub mod fit;
+pub mod logo;
+pub mod render;
 pub mod replay_stream;
 pub mod sim;
 
@@ -34,6 +36,12 @@ pub enum Command {
     /// Offline evaluations: accuracy tables on simulated and real flights.
     #[command(subcommand)]
     Eval(eval::EvalCommand),
+    /// Labelled synthetic ceiling-camera crops of simulated balls: PNG +
+    /// labels, and/or a live TTI1 stream.
+    Render(render::RenderArgs),
+    /// Spin from a sequence of ball crops (the logo, background
+    /// subtraction), or `--eval` on rendered sequences.
+    Logo(logo::LogoArgs),
 }
 
 /// Runs the command line; returns the process exit code.
@@ -43,6 +51,8 @@ pub fn main() -> i32 {
         Command::Sim(a) => sim::run(a),
         Command::Fit(a) => fit::run(a),
         Command::Eval(c) => eval::run(c),
+        Command::Render(a) => render::run(a),
+        Command::Logo(a) => logo::run(a),
     };
     match result {
         Ok(()) => 0,
