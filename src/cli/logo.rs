@@ -275,7 +275,7 @@ fn f1(x: f64) -> String {
 /// The two tables of docs/logo.md.
 pub fn table(rows: &[Row]) -> String {
     let mut s = String::new();
-    let _ = writeln!(s, "Logo positions: mean vector-angle error, degrees (frames found and truly visible)\n");
+    let _ = writeln!(s, "Logo positions: mean vector-angle error, degrees (frames where a logo was found and some of it is on the visible hemisphere; detection accuracy: found ⇔ logo centre on the visible side)\n");
     let _ = writeln!(
         s,
         "| setting | balls | frames | detection acc. | centroid (paper) | + segment fit | weighted + segment | cut frames | cut: centroid | cut: + segment | cut: weighted |"

@@ -44,14 +44,15 @@ pub struct BallEval {
     pub colour: &'static str,
     pub ball: usize,
     pub frames: usize,
-    /// Frames whose logo is (partly) on the visible hemisphere.
+    /// Frames whose logo's centre is on the visible hemisphere.
     pub truth_visible: usize,
     /// Frames in which a logo was found.
     pub detected: usize,
     /// Frames where found ⇔ truly visible.
     pub classified_right: usize,
-    /// Vector-angle errors, degrees, on frames found and truly visible:
-    /// per method (centroid, segment, weighted).
+    /// Vector-angle errors, degrees, on frames where a logo was found and
+    /// some of it lies on the visible hemisphere: per method (centroid,
+    /// segment, weighted).
     pub angle_err: [Vec<f64>; 3],
     /// The same restricted to logos touching the rim (cut).
     pub angle_err_cut: [Vec<f64>; 3],
@@ -124,7 +125,7 @@ fn eval_ball(
         e.classified_right += (m.is_some() == l.logo_visible) as usize;
         truth_samples.push(LogoSample::new(l.t, m.map(|_| l.logo_camera)));
         if let Some(m) = m
-            && l.logo_visible
+            && l.logo_facing > -cam.logo_angular_radius().sin()
         {
             for (i, method) in LogoMethod::ALL.into_iter().enumerate() {
                 let err = angle_deg(&method.position(m), &l.logo_camera);

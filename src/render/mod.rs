@@ -157,7 +157,8 @@ pub struct FrameLabel {
     /// Its component towards the camera (the view frame's z): 1 facing the
     /// camera, 0 on the rim, −1 hidden behind.
     pub logo_facing: f64,
-    /// Some of the logo's disc lies on the visible hemisphere.
+    /// The logo's centre lies on the visible hemisphere (facing > 0; the
+    /// paper's visibility label).
     pub logo_visible: bool,
     /// Ball orientation, body → camera.
     pub camera_from_body: UnitQuaternion<f64>,
@@ -333,7 +334,7 @@ impl Scene {
         let logo_camera = camera_from_body * Vec3::z();
         let toward = -p_c.normalize();
         let logo_facing = logo_camera.dot(&toward);
-        let logo_visible = logo_facing > -self.cam.logo_angular_radius().sin();
+        let logo_visible = logo_facing > 0.0;
         Some(Frame {
             crop,
             label: FrameLabel {
