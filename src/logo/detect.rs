@@ -57,9 +57,9 @@ impl<'a> CropImage<'a> {
 /// the ball's disc (view frame, x right, y up, in ball radii).
 #[derive(Clone, Debug, PartialEq)]
 pub struct BallReference {
-    cells: [[u8; 3]; REF_GRID * REF_GRID],
-    /// Chroma threshold per cell (0 on a colourless ball: no colour test).
-    chroma_min: [u8; REF_GRID * REF_GRID],
+    /// Per cell: R, G, B and the chroma threshold (0 on a colourless
+    /// ball), packed for one load per pixel.
+    cells: [[u8; 4]; REF_GRID * REF_GRID],
     /// The ball is coloured (the colour threshold is used).
     pub coloured: bool,
 }
@@ -129,18 +129,17 @@ impl BallReference {
             }
         }
         let coloured = n > 0.0 && ch > br / 3.0;
-        let mut chroma_min = [0u8; REF_GRID * REF_GRID];
-        if coloured {
-            for (m, cell) in chroma_min.iter_mut().zip(&cells) {
-                *m = (f32::from(chroma(*cell)) * colour_fraction) as u8;
-            }
-        }
-        Some(BallReference { cells, chroma_min, coloured })
+        let cells = cells.map(|c| {
+            let chroma_min = if coloured { (f32::from(chroma(c)) * colour_fraction) as u8 } else { 0 };
+            [c[0], c[1], c[2], chroma_min]
+        });
+        Some(BallReference { cells, coloured })
     }
 
     /// The reference colour at (x, y) in ball radii (view frame).
     pub fn at(&self, x: f64, y: f64) -> [u8; 3] {
-        self.cells[cell_of(x, y)]
+        let c = self.cells[cell_of(x, y)];
+        [c[0], c[1], c[2]]
     }
 }
 
@@ -220,28 +219,48 @@ pub fn detect(
     let mut pixels = 0u32;
     let mut max_rr = 0.0f64;
     let half = REF_GRID as f64 / 2.0;
+    // rr(du) = A du² + 2 B du + C along a row: the span inside the limb
+    // is solved per row, so the inner loop only visits the ball's pixels.
+    let qa = m[0] * m[0] + m[2] * m[2];
     for row in row0..=row1 {
         let dv = row as f64 - cv;
         let (xr, yr) = (m[1] * dv, m[3] * dv);
+        let qb = m[0] * xr + m[2] * yr;
+        let qc = xr * xr + yr * yr - limb2;
+        let disc = qb * qb - qa * qc;
+        if disc < 0.0 {
+            continue;
+        }
+        let sq = disc.sqrt();
+        let lo = (cu + (-qb - sq) / qa).ceil().max(col0 as f64) as usize;
+        let hi = (cu + (-qb + sq) / qa).floor().min(col1 as f64);
+        if hi < lo as f64 {
+            continue;
+        }
+        let hi = hi as usize;
         let line = &crop.rgb[3 * row * crop.width..3 * (row + 1) * crop.width];
-        for col in col0..=col1 {
-            let du = col as f64 - cu;
-            let x = m[0] * du + xr;
-            let y = m[2] * du + yr;
-            let rr = x * x + y * y;
-            if rr > limb2 {
-                continue;
-            }
-            let gx = ((x + 1.0) * half) as usize;
-            let gy = ((1.0 - y) * half) as usize;
-            let cell = gy.min(REF_GRID - 1) * REF_GRID + gx.min(REF_GRID - 1);
-            let r = reference.cells[cell];
-            let p = &line[3 * col..3 * col + 3];
+        let du0 = lo as f64 - cu;
+        // Grid coordinates in 16.16 fixed point, advanced per column.
+        const ONE: f64 = 65536.0;
+        let mut gx = ((m[0] * du0 + xr + 1.0) * half * ONE) as i64;
+        let mut gy = ((1.0 - (m[2] * du0 + yr)) * half * ONE) as i64;
+        let (dgx, dgy) = ((m[0] * half * ONE) as i64, (-m[2] * half * ONE) as i64);
+        for (i, p) in line[3 * lo..3 * hi + 3].chunks_exact(3).enumerate() {
+            let cx = ((gx >> 16) as usize).min(REF_GRID - 1);
+            let cy = ((gy >> 16) as usize).min(REF_GRID - 1);
+            gx += dgx;
+            gy += dgy;
+            let r = reference.cells[cy * REF_GRID + cx];
             let diff = (i16::from(p[0]) - i16::from(r[0])).unsigned_abs()
                 + (i16::from(p[1]) - i16::from(r[1])).unsigned_abs()
                 + (i16::from(p[2]) - i16::from(r[2])).unsigned_abs();
-            let ch = p[0].max(p[1]).max(p[2]) - p[0].min(p[1]).min(p[2]);
-            if diff > thr || ch < reference.chroma_min[cell] {
+            // (c) only on a coloured ball (r[3] = 0 otherwise).
+            let colour_hit = p[0].max(p[1]).max(p[2]) - p[0].min(p[1]).min(p[2]) < r[3];
+            if diff > thr || colour_hit {
+                let du = (lo + i) as f64 - cu;
+                let x = m[0] * du + xr;
+                let y = m[2] * du + yr;
+                let rr = x * x + y * y;
                 let z = (1.0 - rr).max(0.0).sqrt();
                 sx += x;
                 sy += y;
