@@ -22,8 +22,8 @@ fn sequence(cam: &CameraCalib) -> Sequence {
     (0..100)
         .find_map(|j| {
             let k = 7 + 9 * j;
-            let b = simulate_ball(1, k, Setting::ALL[7], &prop, cal.strike.hit_plane_x, &TrackerModel::default())
-                .ok()?;
+            let b =
+                simulate_ball(1, k, Setting::ALL[7], &prop, cal.strike.hit_plane_x, &TrackerModel::default()).ok()?;
             let s = render_sequence(&scene, &b.truth, &prop, 1, k, &SequenceOptions { frames: 20 });
             (s.frames.len() == 20).then_some(s)
         })

@@ -19,6 +19,7 @@ fn rendered_balls_are_read_to_a_few_degrees() {
         settings: vec![Setting::ALL[1], Setting::ALL[7]],
         colours: vec![BallColour::Orange, BallColour::White],
         max_tries: 24,
+        fit: Default::default(),
     };
     let balls = evaluate(&cal, &cam, &opts);
     assert_eq!(balls.len(), 8);

@@ -123,7 +123,11 @@ impl CameraCalib {
             ("camera.frame_rate_hz", c.frame_rate_hz, pos(c.frame_rate_hz) && c.frame_rate_hz <= 100_000.0),
             ("camera.exposure_s", c.exposure_s, pos(c.exposure_s) && c.exposure_s * c.frame_rate_hz <= 1.0),
             ("camera.position", c.position[2], c.position.iter().all(|p| p.is_finite()) && c.position[2] > 0.5),
-            ("camera.mount_ypr_deg", c.mount_ypr_deg[0], c.mount_ypr_deg.iter().all(|a| a.is_finite() && a.abs() <= 30.0)),
+            (
+                "camera.mount_ypr_deg",
+                c.mount_ypr_deg[0],
+                c.mount_ypr_deg.iter().all(|a| a.is_finite() && a.abs() <= 30.0),
+            ),
             ("logo.ball_radius_m", l.ball_radius_m, pos(l.ball_radius_m) && l.ball_radius_m < 0.1),
             ("logo.radius_m", l.radius_m, pos(l.radius_m) && l.radius_m < 0.9 * l.ball_radius_m),
         ];

@@ -87,7 +87,7 @@ pub fn run(a: LogoArgs) -> anyhow::Result<()> {
     let method = parse_method(&a.method)?;
     let fit_cfg = RotationFitConfig { gap_rule: parse_gap_rule(&a.gap_rule)?, ..RotationFitConfig::default() };
     if a.eval {
-        return run_eval(&a, &cam);
+        return run_eval(&a, &cam, fit_cfg);
     }
     let Some(folder) = a.folder.as_deref() else {
         return Err(bad("FOLDER is required without --eval"));
@@ -185,10 +185,18 @@ fn read_folder(folder: &Path) -> Result<Vec<FolderFrame>, BadInput> {
             return Err(BadInput(format!("{name}: data row {row}: radius {} must be positive", v[3])));
         }
         let file = record.get(cols[0]).unwrap_or("");
-        let (width, height, rgb) = read_png(&folder.join(file))
-            .map_err(|e| BadInput(format!("{name}: data row {row}: {file}: {e}")))?;
+        let (width, height, rgb) =
+            read_png(&folder.join(file)).map_err(|e| BadInput(format!("{name}: data row {row}: {file}: {e}")))?;
         let (x0, y0) = crop_origin(v[1], v[2], width as u32, height as u32);
-        out.push(FolderFrame { t: v[0], circle: Circle { u: v[1], v: v[2], radius: v[3] }, x0, y0, width, height, rgb });
+        out.push(FolderFrame {
+            t: v[0],
+            circle: Circle { u: v[1], v: v[2], radius: v[3] },
+            x0,
+            y0,
+            width,
+            height,
+            rgb,
+        });
     }
     if out.windows(2).any(|w| w[1].t <= w[0].t) {
         return Err(BadInput(format!("{name}: times must increase")));
@@ -235,7 +243,7 @@ pub fn parse_colours(s: &str) -> Result<Vec<BallColour>, BadInput> {
     Ok(vec![s.parse::<BallColour>().map_err(BadInput)?])
 }
 
-fn run_eval(a: &LogoArgs, cam: &CameraCalib) -> anyhow::Result<()> {
+fn run_eval(a: &LogoArgs, cam: &CameraCalib, fit: RotationFitConfig) -> anyhow::Result<()> {
     let cal = Calibration::load(a.calib.as_deref()).map_err(|e| bad(e.to_string()))?;
     if a.balls == 0 || a.frames < eval::MIN_FRAMES {
         return Err(bad(format!("--balls must be ≥ 1 and --frames ≥ {}", eval::MIN_FRAMES)));
@@ -247,6 +255,7 @@ fn run_eval(a: &LogoArgs, cam: &CameraCalib) -> anyhow::Result<()> {
         settings: parse_settings(&a.setting)?,
         colours: parse_colours(&a.colour)?,
         max_tries: 8 * a.balls + 8,
+        fit,
     };
     let balls = eval::evaluate(&cal, cam, &opts);
     let mut rows = Vec::new();
@@ -275,7 +284,10 @@ fn f1(x: f64) -> String {
 /// The two tables of docs/logo.md.
 pub fn table(rows: &[Row]) -> String {
     let mut s = String::new();
-    let _ = writeln!(s, "Logo positions: mean vector-angle error, degrees (frames where a logo was found and some of it is on the visible hemisphere; detection accuracy: found ⇔ logo centre on the visible side)\n");
+    let _ = writeln!(
+        s,
+        "Logo positions: mean vector-angle error, degrees (frames where a logo was found and some of it is on the visible hemisphere; detection accuracy: found ⇔ logo centre on the visible side)\n"
+    );
     let _ = writeln!(
         s,
         "| setting | balls | frames | detection acc. | centroid (paper) | + segment fit | weighted + segment | cut frames | cut: centroid | cut: + segment | cut: weighted |"
@@ -312,13 +324,7 @@ pub fn table(rows: &[Row]) -> String {
         for i in 0..3 {
             let _ = write!(s, "| {} | {} | {} ", r.fitted[i], f1(r.axis_median[i]), f1(r.magnitude_median[i]));
         }
-        let _ = writeln!(
-            s,
-            "| {} | {} | {} |",
-            r.truth_fitted,
-            f1(r.truth_axis_median),
-            f1(r.truth_magnitude_median)
-        );
+        let _ = writeln!(s, "| {} | {} | {} |", r.truth_fitted, f1(r.truth_axis_median), f1(r.truth_magnitude_median));
     }
     s
 }

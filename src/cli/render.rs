@@ -83,7 +83,10 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
     let settings: Vec<Setting> = if a.setting.trim().eq_ignore_ascii_case("all") {
         Setting::ALL.to_vec()
     } else {
-        a.setting.split(',').map(|n| n.parse::<Setting>().map_err(|e| BadInput(e.to_string()))).collect::<Result<_, _>>()?
+        a.setting
+            .split(',')
+            .map(|n| n.parse::<Setting>().map_err(|e| BadInput(e.to_string())))
+            .collect::<Result<_, _>>()?
     };
     let colours = parse_colours(&a.colour)?;
     if a.frames_per_ball < MIN_FRAMES || a.frames_per_ball > 1000 {

@@ -35,6 +35,8 @@ pub struct EvalOptions {
     /// Balls tried per setting and colour before giving up on finding
     /// `balls` that fly through the filmed strip.
     pub max_tries: usize,
+    /// The rotation fit's options (gap rule).
+    pub fit: RotationFitConfig,
 }
 
 /// One evaluated ball.
@@ -76,6 +78,7 @@ fn eval_ball(
     k: usize,
     setting: Setting,
     frames: usize,
+    fit_cfg: &RotationFitConfig,
 ) -> Option<BallEval> {
     let prop = cal.propagator();
     let cam = &scene.cam;
@@ -95,11 +98,10 @@ fn eval_ball(
         })
         .collect();
     let det = DetectorConfig::for_logo(cam.logo_angular_radius());
-    let fit_cfg = RotationFitConfig::default();
     let mut spin_fit: [Result<[f64; 3], String>; 3] = std::array::from_fn(|_| Err(String::new()));
     let mut measurements = Vec::new();
     for (i, method) in LogoMethod::ALL.into_iter().enumerate() {
-        let r = process_sequence(cam, &inputs, &det, &fit_cfg, method).ok()?;
+        let r = process_sequence(cam, &inputs, &det, fit_cfg, method).ok()?;
         spin_fit[i] = r.fit.map(|f| f.spin.into()).map_err(|e| e.to_string());
         measurements = r.measurements;
     }
@@ -136,7 +138,7 @@ fn eval_ball(
             }
         }
     }
-    e.spin_fit_truth = fit_rotation(&truth_samples, &fit_cfg)
+    e.spin_fit_truth = fit_rotation(&truth_samples, fit_cfg)
         .map(|f| f.rotated(&cam.table_from_camera).spin.into())
         .map_err(|e| e.to_string());
     Some(e)
@@ -145,12 +147,8 @@ fn eval_ball(
 /// Renders and evaluates the balls of `opts` (in parallel over settings and
 /// colours; the result does not depend on the thread count).
 pub fn evaluate(cal: &Calibration, cam: &CameraCalib, opts: &EvalOptions) -> Vec<BallEval> {
-    let jobs: Vec<(usize, Setting, BallColour)> = opts
-        .settings
-        .iter()
-        .enumerate()
-        .flat_map(|(i, s)| opts.colours.iter().map(move |c| (i, *s, *c)))
-        .collect();
+    let jobs: Vec<(usize, Setting, BallColour)> =
+        opts.settings.iter().enumerate().flat_map(|(i, s)| opts.colours.iter().map(move |c| (i, *s, *c))).collect();
     let n_settings = opts.settings.len().max(1);
     let mut out: Vec<BallEval> = jobs
         .par_iter()
@@ -163,7 +161,7 @@ pub fn evaluate(cal: &Calibration, cam: &CameraCalib, opts: &EvalOptions) -> Vec
                 }
                 // Ball indices unique across settings: k = i + n·j.
                 let k = i + n_settings * j;
-                if let Some(e) = eval_ball(cal, &scene, opts.seed, k, setting, opts.frames) {
+                if let Some(e) = eval_ball(cal, &scene, opts.seed, k, setting, opts.frames, &opts.fit) {
                     got.push(e);
                 }
             }

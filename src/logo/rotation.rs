@@ -277,7 +277,9 @@ pub fn fit_rotation(samples: &[LogoSample], cfg: &RotationFitConfig) -> Result<R
     let var_t = stt - st * st / m;
     let slope = (stp - st * sp / m) / var_t;
     let intercept = (sp - slope * st) / m;
-    let sse = (spp - 2.0 * slope * stp - 2.0 * intercept * sp + slope * slope * stt + 2.0 * slope * intercept * st
+    let sse = (spp - 2.0 * slope * stp - 2.0 * intercept * sp
+        + slope * slope * stt
+        + 2.0 * slope * intercept * st
         + m * intercept * intercept)
         .max(0.0);
     let rms_circle = (plane_cost(samples, &n, d) / (2.0 * m)).sqrt();
@@ -332,11 +334,17 @@ mod tests {
             let fit = fit_rotation(&s, &RotationFitConfig { gap_rule: rule, ..Default::default() }).unwrap();
             assert!((fit.spin - w).norm() < 1e-6 * w.norm(), "{rule:?} {fit:?}");
         }
-        // 95 rps: a gap longer than a turn; only the directed rule gets it.
-        let w = Vec3::new(0.0, 95.0 * std::f64::consts::TAU, 0.0);
-        let s = sequence(w, p0, 30, 0.05);
+        // 87 rps with the logo missed for a while: a gap longer than a
+        // turn, which the directed rule bridges with the rate it saw.
+        let w = Vec3::new(0.0, 87.0 * std::f64::consts::TAU, 0.0);
+        let mut s = sequence(w, p0, 30, 0.05);
+        for x in &mut s[9..16] {
+            x.pos = None;
+        }
         let fit = fit_rotation(&s, &RotationFitConfig::default()).unwrap();
         assert!((fit.spin - w).norm() < 1e-6 * w.norm(), "{fit:?}");
+        let paper = fit_rotation(&s, &RotationFitConfig { gap_rule: GapRule::Paper, ..Default::default() }).unwrap();
+        assert!((paper.spin - w).norm() > 0.05 * w.norm(), "{paper:?}");
     }
 
     #[test]

@@ -29,7 +29,7 @@ pub fn segment_area(alpha: f64, r: f64) -> f64 {
 /// radius `r` (clamped to the full disc). Bisection; no allocation.
 pub fn segment_half_angle(area: f64, r: f64) -> f64 {
     let full = std::f64::consts::PI * r * r;
-    if !(area > 0.0) {
+    if area.is_nan() || area <= 0.0 {
         return 0.0;
     }
     if area >= full {

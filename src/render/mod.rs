@@ -233,7 +233,15 @@ impl Scene {
 
     /// Renders the `width` × `height` block at (x0, y0): the ball at `pose`
     /// (None: the background alone), motion-blurred over the exposure.
-    pub fn render(&self, pose: Option<&BallPose>, x0: i64, y0: i64, width: u32, height: u32, rng: &mut ChaCha8Rng) -> Crop {
+    pub fn render(
+        &self,
+        pose: Option<&BallPose>,
+        x0: i64,
+        y0: i64,
+        width: u32,
+        height: u32,
+        rng: &mut ChaCha8Rng,
+    ) -> Crop {
         let (w, h) = (width as usize, height as usize);
         let exposure = self.cam.camera.exposure_s;
         let rtc = self.cam.table_from_camera;
@@ -432,7 +440,8 @@ fn value_noise(x: f64, y: f64) -> f64 {
     let (xi, yi) = (x.floor(), y.floor());
     let (fx, fy) = (x - xi, y - yi);
     let h = |i: f64, j: f64| -> f64 {
-        let mut z = (i as i64 as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ (j as i64 as u64).wrapping_mul(0xC2B2_AE3D_27D4_EB4F);
+        let mut z = (i as i64 as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)
+            ^ (j as i64 as u64).wrapping_mul(0xC2B2_AE3D_27D4_EB4F);
         z ^= z >> 29;
         z = z.wrapping_mul(0xBF58_476D_1CE4_E5B9);
         z ^= z >> 32;
@@ -459,7 +468,8 @@ mod tests {
         // Find a ball that flies through the filmed strip.
         let mut found = None;
         for k in 0..12 {
-            let b = simulate_ball(3, k, Setting::ALL[7], &prop, cal.strike.hit_plane_x, &TrackerModel::default()).unwrap();
+            let b =
+                simulate_ball(3, k, Setting::ALL[7], &prop, cal.strike.hit_plane_x, &TrackerModel::default()).unwrap();
             let seq = render_sequence(&scene, &b.truth, &prop, 3, k, &SequenceOptions { frames: 4 });
             if seq.frames.len() == 4 {
                 found = Some((b, seq));

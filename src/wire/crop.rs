@@ -207,7 +207,10 @@ impl<'a> Crop<'a> {
         }
         let expected = 3 * usize::from(w) * usize::from(h);
         if self.pixels.len() != expected {
-            return Err(CropError::WrongLength { len: CROP_HEADER_LEN + self.pixels.len(), expected: CROP_HEADER_LEN + expected });
+            return Err(CropError::WrongLength {
+                len: CROP_HEADER_LEN + self.pixels.len(),
+                expected: CROP_HEADER_LEN + expected,
+            });
         }
         let needed = self.buffer_len();
         let Some(out) = buf.get_mut(..needed) else {
