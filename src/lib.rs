@@ -20,6 +20,9 @@
 //! - [`calib`]: the calibration files in `calib/`.
 //! - [`data`]: real recorded trajectories (MPI launcher set), their frame,
 //!   and the real-data evaluation and calibration harness.
+//! - [`logo`]: spin from the ball's printed logo in ceiling-camera crops
+//!   (background subtraction, circular-segment correction, rotation fit).
+//! - [`render`]: the ceiling-camera renderer, labelled synthetic crops.
 //! - [`cli`]: the `topspin` command line.
 
 pub mod calib;
@@ -30,10 +33,12 @@ pub mod estimator;
 pub mod eval;
 pub mod fit;
 pub mod ingest;
+pub mod logo;
 pub mod mock_krc;
 pub mod motion;
 pub mod physics;
 pub mod plan;
+pub mod render;
 pub mod rsi;
 pub mod runtime;
 pub mod sim;

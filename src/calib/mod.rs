@@ -4,6 +4,8 @@
 
 use std::path::{Path, PathBuf};
 
+pub mod camera;
+
 use serde::{Deserialize, Serialize};
 
 use crate::physics::{PhysicsParams, Propagator, Table};

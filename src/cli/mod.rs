@@ -8,7 +8,9 @@ pub mod demo;
 pub mod eval;
 pub mod eval_real;
 pub mod fit;
+pub mod logo;
 pub mod mock_krc;
+pub mod render;
 pub mod replay_stream;
 pub mod sim;
 
@@ -42,6 +44,12 @@ pub enum Command {
     Eval(eval::EvalCommand),
     /// The mock KR C4: an RSI client sending <Rob> every 4 ms (12 ms).
     MockKrc(mock_krc::MockKrcArgs),
+    /// Labelled synthetic ceiling-camera crops of simulated balls: PNG +
+    /// labels, and/or a live TTI1 stream.
+    Render(render::RenderArgs),
+    /// Spin from a sequence of ball crops (the logo, background
+    /// subtraction), or `--eval` on rendered sequences.
+    Logo(logo::LogoArgs),
 }
 
 /// Runs the command line; returns the process exit code.
@@ -53,6 +61,8 @@ pub fn main() -> i32 {
         Command::Demo(a) => demo::run(a),
         Command::Eval(c) => eval::run(c),
         Command::MockKrc(a) => mock_krc::run(a),
+        Command::Render(a) => render::run(a),
+        Command::Logo(a) => logo::run(a),
     };
     match result {
         Ok(()) => 0,

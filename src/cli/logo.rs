@@ -1,0 +1,330 @@
+//! `topspin logo FOLDER [--json]`: spin from a sequence of ball crops, and
+//! `topspin logo --eval`: the method's accuracy on rendered sequences.
+//!
+//! The folder holds the crops as PNG (RGB8 or RGBA8) and a `frames.csv`
+//! with at least the columns `file,t,u,v,radius` (extra columns ignored):
+//! the PNG's path relative to the folder, the capture time in seconds, and
+//! the ball's circle as the camera side measured it, in full-sensor pixels.
+//! A crop of w × h pixels lies at (⌊u⌋ − w/2, ⌊v⌋ − h/2) on the sensor (the
+//! TTI1 convention). `topspin render` writes such folders, one per ball.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use serde_json::json;
+
+use super::BadInput;
+use crate::calib::Calibration;
+use crate::calib::camera::CameraCalib;
+use crate::logo::ball::Circle;
+use crate::logo::eval::{self, BallEval, EvalOptions, Row};
+use crate::logo::pipeline::{CropInput, LogoMethod, process_sequence};
+use crate::logo::{CropImage, DetectorConfig, GapRule, RotationFitConfig};
+use crate::physics::rad_to_rps;
+use crate::render::{BallColour, crop_origin};
+use crate::sim::Setting;
+
+#[derive(Debug, clap::Args)]
+pub struct LogoArgs {
+    /// Folder with frames.csv (file,t,u,v,radius) and the PNG crops.
+    #[arg(required_unless_present = "eval")]
+    pub folder: Option<PathBuf>,
+    /// Print one JSON object.
+    #[arg(long)]
+    pub json: bool,
+    /// Evaluate on rendered sequences instead (no FOLDER).
+    #[arg(long, conflicts_with = "folder")]
+    pub eval: bool,
+    /// --eval: filmed balls per setting and colour.
+    #[arg(long, default_value_t = 6)]
+    pub balls: usize,
+    /// --eval: seed of the simulated and rendered balls.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// --eval: `all` or comma-separated launcher settings.
+    #[arg(long, default_value = "all")]
+    pub setting: String,
+    /// --eval: orange, white or both.
+    #[arg(long, default_value = "both")]
+    pub colour: String,
+    /// --eval: frames per ball.
+    #[arg(long, default_value_t = 20)]
+    pub frames: usize,
+    /// Logo centre: centroid (paper, uncorrected), segment (paper with the
+    /// circular-segment correction) or weighted (area-weighted + segment).
+    #[arg(long, default_value = "segment")]
+    pub method: String,
+    /// Gaps of two or more unseen frames: paper (the large angle) or
+    /// directed (angle in the rotation's direction plus predicted turns).
+    #[arg(long, default_value = "directed")]
+    pub gap_rule: String,
+    /// Calibration folder (camera.toml; the others for --eval).
+    #[arg(long, value_name = "DIR")]
+    pub calib: Option<PathBuf>,
+}
+
+fn bad(msg: impl Into<String>) -> anyhow::Error {
+    BadInput(msg.into()).into()
+}
+
+fn parse_method(s: &str) -> Result<LogoMethod, BadInput> {
+    LogoMethod::ALL
+        .into_iter()
+        .find(|m| m.name() == s)
+        .ok_or_else(|| BadInput(format!("--method `{s}`: expected centroid, segment or weighted")))
+}
+
+fn parse_gap_rule(s: &str) -> Result<GapRule, BadInput> {
+    match s {
+        "paper" => Ok(GapRule::Paper),
+        "directed" => Ok(GapRule::Directed),
+        _ => Err(BadInput(format!("--gap-rule `{s}`: expected paper or directed"))),
+    }
+}
+
+pub fn run(a: LogoArgs) -> anyhow::Result<()> {
+    let cam = CameraCalib::load(a.calib.as_deref()).map_err(|e| bad(e.to_string()))?;
+    let method = parse_method(&a.method)?;
+    let fit_cfg = RotationFitConfig { gap_rule: parse_gap_rule(&a.gap_rule)?, ..RotationFitConfig::default() };
+    if a.eval {
+        return run_eval(&a, &cam, fit_cfg);
+    }
+    let Some(folder) = a.folder.as_deref() else {
+        return Err(bad("FOLDER is required without --eval"));
+    };
+    let frames = read_folder(folder)?;
+    let inputs: Vec<CropInput<'_>> = frames
+        .iter()
+        .map(|f| CropInput {
+            t: f.t,
+            crop: CropImage::new(f.x0, f.y0, f.width, f.height, &f.rgb).expect("decoded crops are whole"),
+            circle: f.circle,
+        })
+        .collect();
+    let det = DetectorConfig::for_logo(cam.logo_angular_radius());
+    let r = process_sequence(&cam, &inputs, &det, &fit_cfg, method)
+        .map_err(|e| bad(format!("{}: {e}", folder.display())))?;
+    let seen = r.measurements.iter().filter(|m| m.is_some()).count();
+    let fit = r.fit.map_err(|e| bad(format!("{}: {e}", folder.display())))?;
+    let w = fit.spin;
+    if a.json {
+        let v = json!({
+            "spin": [w.x, w.y, w.z],
+            "spin_rps": [rad_to_rps(w.x), rad_to_rps(w.y), rad_to_rps(w.z)],
+            "rate": fit.rate,
+            "rate_rps": rad_to_rps(fit.rate),
+            "axis": [fit.axis.x, fit.axis.y, fit.axis.z],
+            "frames": frames.len(),
+            "logo_seen": seen,
+            "method": method.name(),
+            "rms_angle": fit.rms_angle,
+            "rms_circle": fit.rms_circle,
+            "frame": "table",
+        });
+        println!("{v}");
+    } else {
+        println!(
+            "spin [{:.1} {:.1} {:.1}] rad/s = [{:.2} {:.2} {:.2}] rps, |ω| {:.1} rad/s ({:.2} rps), table frame; \
+             logo seen in {seen} of {} frames",
+            w.x,
+            w.y,
+            w.z,
+            rad_to_rps(w.x),
+            rad_to_rps(w.y),
+            rad_to_rps(w.z),
+            fit.rate,
+            rad_to_rps(fit.rate),
+            frames.len()
+        );
+    }
+    Ok(())
+}
+
+/// One decoded crop of a folder.
+struct FolderFrame {
+    t: f64,
+    circle: Circle,
+    x0: i64,
+    y0: i64,
+    width: usize,
+    height: usize,
+    rgb: Vec<u8>,
+}
+
+fn read_folder(folder: &Path) -> Result<Vec<FolderFrame>, BadInput> {
+    let csv_path = folder.join("frames.csv");
+    let name = csv_path.display();
+    if !folder.is_dir() {
+        return Err(BadInput(format!("{}: not a folder", folder.display())));
+    }
+    let mut reader = csv::ReaderBuilder::new()
+        .trim(csv::Trim::All)
+        .from_path(&csv_path)
+        .map_err(|e| BadInput(format!("{name}: {e}")))?;
+    let headers = reader.headers().map_err(|e| BadInput(format!("{name}: {e}")))?.clone();
+    let column = |key: &str| {
+        headers
+            .iter()
+            .position(|h| h == key)
+            .ok_or_else(|| BadInput(format!("{name}: header has no column `{key}` (expected file,t,u,v,radius)")))
+    };
+    let cols = [column("file")?, column("t")?, column("u")?, column("v")?, column("radius")?];
+    let mut out = Vec::new();
+    for (row, record) in reader.records().enumerate() {
+        let record = record.map_err(|e| BadInput(format!("{name}: data row {row}: {e}")))?;
+        let mut v = [0.0; 4];
+        for (k, &c) in cols[1..].iter().enumerate() {
+            let text = record.get(c).unwrap_or("");
+            v[k] = text
+                .parse::<f64>()
+                .ok()
+                .filter(|x| x.is_finite())
+                .ok_or_else(|| BadInput(format!("{name}: data row {row}: `{text}` is not a finite number")))?;
+        }
+        if v[3] <= 0.0 {
+            return Err(BadInput(format!("{name}: data row {row}: radius {} must be positive", v[3])));
+        }
+        let file = record.get(cols[0]).unwrap_or("");
+        let (width, height, rgb) =
+            read_png(&folder.join(file)).map_err(|e| BadInput(format!("{name}: data row {row}: {file}: {e}")))?;
+        let (x0, y0) = crop_origin(v[1], v[2], width as u32, height as u32);
+        out.push(FolderFrame {
+            t: v[0],
+            circle: Circle { u: v[1], v: v[2], radius: v[3] },
+            x0,
+            y0,
+            width,
+            height,
+            rgb,
+        });
+    }
+    if out.windows(2).any(|w| w[1].t <= w[0].t) {
+        return Err(BadInput(format!("{name}: times must increase")));
+    }
+    Ok(out)
+}
+
+/// Decodes an 8-bit RGB or RGBA PNG into RGB8.
+pub fn read_png(path: &Path) -> Result<(usize, usize, Vec<u8>), String> {
+    let file = std::fs::File::open(path).map_err(|e| e.to_string())?;
+    let decoder = png::Decoder::new(std::io::BufReader::new(file));
+    let mut reader = decoder.read_info().map_err(|e| e.to_string())?;
+    let size = reader.output_buffer_size().ok_or("PNG too large")?;
+    let mut buf = vec![0u8; size];
+    let info = reader.next_frame(&mut buf).map_err(|e| e.to_string())?;
+    if info.bit_depth != png::BitDepth::Eight {
+        return Err(format!("{:?}-bit PNG (need 8-bit RGB)", info.bit_depth));
+    }
+    let (w, h) = (info.width as usize, info.height as usize);
+    if w == 0 || h == 0 || w > 96 || h > 96 {
+        return Err(format!("crop of {w} × {h} px (each side 1..=96)"));
+    }
+    let px = w * h;
+    let rgb = match info.color_type {
+        png::ColorType::Rgb => buf[..3 * px].to_vec(),
+        png::ColorType::Rgba => buf[..4 * px].chunks_exact(4).flat_map(|c| [c[0], c[1], c[2]]).collect(),
+        other => return Err(format!("{other:?} PNG (need RGB or RGBA)")),
+    };
+    Ok((w, h, rgb))
+}
+
+fn parse_settings(s: &str) -> Result<Vec<Setting>, BadInput> {
+    if s.trim().eq_ignore_ascii_case("all") {
+        return Ok(Setting::ALL.to_vec());
+    }
+    s.split(',').map(|n| n.parse::<Setting>().map_err(|e| BadInput(e.to_string()))).collect()
+}
+
+/// `--colour orange|white|both`.
+pub fn parse_colours(s: &str) -> Result<Vec<BallColour>, BadInput> {
+    if s.trim().eq_ignore_ascii_case("both") {
+        return Ok(BallColour::ALL.to_vec());
+    }
+    Ok(vec![s.parse::<BallColour>().map_err(BadInput)?])
+}
+
+fn run_eval(a: &LogoArgs, cam: &CameraCalib, fit: RotationFitConfig) -> anyhow::Result<()> {
+    let cal = Calibration::load(a.calib.as_deref()).map_err(|e| bad(e.to_string()))?;
+    if a.balls == 0 || a.frames < eval::MIN_FRAMES {
+        return Err(bad(format!("--balls must be ≥ 1 and --frames ≥ {}", eval::MIN_FRAMES)));
+    }
+    let opts = EvalOptions {
+        seed: a.seed,
+        balls: a.balls,
+        frames: a.frames,
+        settings: parse_settings(&a.setting)?,
+        colours: parse_colours(&a.colour)?,
+        max_tries: 8 * a.balls + 8,
+        fit,
+    };
+    let balls = eval::evaluate(&cal, cam, &opts);
+    let mut rows = Vec::new();
+    for s in &opts.settings {
+        let group: Vec<&BallEval> = balls.iter().filter(|b| b.setting == *s).collect();
+        rows.push(eval::summarise(&s.to_string(), &group));
+    }
+    for c in &opts.colours {
+        let group: Vec<&BallEval> = balls.iter().filter(|b| b.colour == c.name()).collect();
+        rows.push(eval::summarise(&format!("all {}", c.name()), &group));
+    }
+    let all: Vec<&BallEval> = balls.iter().collect();
+    rows.push(eval::summarise("all", &all));
+    if a.json {
+        println!("{}", serde_json::to_string(&json!({ "rows": rows, "balls": balls }))?);
+    } else {
+        print!("{}", table(&rows));
+    }
+    Ok(())
+}
+
+fn f1(x: f64) -> String {
+    if x.is_finite() { format!("{x:.2}") } else { "-".into() }
+}
+
+/// The two tables of docs/logo.md.
+pub fn table(rows: &[Row]) -> String {
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "Logo positions: mean vector-angle error, degrees (frames where a logo was found and some of it is on the visible hemisphere; detection accuracy: found ⇔ logo centre on the visible side)\n"
+    );
+    let _ = writeln!(
+        s,
+        "| setting | balls | frames | detection acc. | centroid (paper) | + segment fit | weighted + segment | cut frames | cut: centroid | cut: + segment | cut: weighted |"
+    );
+    let _ = writeln!(s, "|---|---|---|---|---|---|---|---|---|---|---|");
+    for r in rows {
+        let _ = writeln!(
+            s,
+            "| {} | {} | {} | {:.1} % | {} | {} | {} | {} | {} | {} | {} |",
+            r.group,
+            r.balls,
+            r.frames,
+            100.0 * r.detection_accuracy,
+            f1(r.angle_mean[0]),
+            f1(r.angle_mean[1]),
+            f1(r.angle_mean[2]),
+            r.cut_frames,
+            f1(r.angle_mean_cut[0]),
+            f1(r.angle_mean_cut[1]),
+            f1(r.angle_mean_cut[2]),
+        );
+    }
+    let _ = writeln!(
+        s,
+        "\nSpin against the truth (table frame): balls fitted, median axis error (deg), median |magnitude error| (rps)\n"
+    );
+    let _ = writeln!(
+        s,
+        "| setting | balls | centroid: fitted | axis | mag | segment: fitted | axis | mag | weighted: fitted | axis | mag | true positions: fitted | axis | mag |"
+    );
+    let _ = writeln!(s, "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
+    for r in rows {
+        let _ = write!(s, "| {} | {} ", r.group, r.balls);
+        for i in 0..3 {
+            let _ = write!(s, "| {} | {} | {} ", r.fitted[i], f1(r.axis_median[i]), f1(r.magnitude_median[i]));
+        }
+        let _ = writeln!(s, "| {} | {} | {} |", r.truth_fitted, f1(r.truth_axis_median), f1(r.truth_magnitude_median));
+    }
+    s
+}
