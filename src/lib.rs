@@ -24,6 +24,7 @@
 
 pub mod calib;
 pub mod cli;
+pub mod config;
 pub mod data;
 pub mod estimator;
 pub mod eval;
