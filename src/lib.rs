@@ -37,5 +37,6 @@ pub mod plan;
 pub mod rsi;
 pub mod runtime;
 pub mod sim;
+pub mod systemd;
 pub mod time;
 pub mod wire;
