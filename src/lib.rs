@@ -34,6 +34,7 @@ pub mod mock_krc;
 pub mod motion;
 pub mod physics;
 pub mod plan;
+pub mod record;
 pub mod rsi;
 pub mod runtime;
 pub mod sim;

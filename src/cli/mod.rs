@@ -7,6 +7,7 @@ use clap::{Parser, Subcommand};
 pub mod eval;
 pub mod fit;
 pub mod mock_krc;
+pub mod replay;
 pub mod replay_stream;
 pub mod sim;
 
@@ -38,6 +39,8 @@ pub enum Command {
     Eval(eval::EvalCommand),
     /// The mock KR C4: an RSI client sending <Rob> every 4 ms (12 ms).
     MockKrc(mock_krc::MockKrcArgs),
+    /// Re-run a recorded session (MCAP) and compare its plans bit for bit.
+    Replay(replay::ReplayArgs),
 }
 
 /// Runs the command line; returns the process exit code.
@@ -48,6 +51,7 @@ pub fn main() -> i32 {
         Command::Fit(a) => fit::run(a),
         Command::Eval(c) => eval::run(c),
         Command::MockKrc(a) => mock_krc::run(a),
+        Command::Replay(a) => replay::run(a),
     };
     match result {
         Ok(()) => 0,
