@@ -67,10 +67,8 @@ impl Session {
                 }
                 std::fs::write(dir.join(name), text).map_err(io)?;
             }
-            Calibration::load(Some(&dir)).map_err(|e| RecordError::Invalid {
-                path: "recorded calibration".to_owned(),
-                message: e.to_string(),
-            })
+            Calibration::load(Some(&dir))
+                .map_err(|e| RecordError::Invalid { path: "recorded calibration".to_owned(), message: e.to_string() })
         })();
         let _ = std::fs::remove_dir_all(&dir);
         result
@@ -129,7 +127,8 @@ pub fn read_session(path: &Path) -> Result<Session, RecordError> {
                 let topic = topics
                     .get(&header.channel_id)
                     .ok_or_else(|| invalid(format!("message on unknown channel {}", header.channel_id)))?;
-                let bad = |what: &str| invalid(format!("bad {topic} message (channel sequence {}): {what}", header.sequence));
+                let bad =
+                    |what: &str| invalid(format!("bad {topic} message (channel sequence {}): {what}", header.sequence));
                 match topic.as_str() {
                     TOPIC_DATAGRAM => {
                         let m: DatagramMsg = serde_json::from_slice(&data).map_err(|e| bad(&e.to_string()))?;

@@ -119,8 +119,12 @@ pub fn replay_session(session: &Session) -> Result<ReplayReport, RecordError> {
         if fields.is_empty() {
             identical += 1;
         } else if first_difference.is_none() {
-            first_difference =
-                Some(Difference { index: i, fields, recorded: Some(format!("{r:?}")), replayed: Some(format!("{p:?}")) });
+            first_difference = Some(Difference {
+                index: i,
+                fields,
+                recorded: Some(format!("{r:?}")),
+                replayed: Some(format!("{p:?}")),
+            });
         }
     }
     let unmatched = recorded.len().max(replayed.len()) - compared;
@@ -130,7 +134,8 @@ pub fn replay_session(session: &Session) -> Result<ReplayReport, RecordError> {
         } else {
             ("extra", None, Some(format!("{:?}", replayed[compared])))
         };
-        first_difference = Some(Difference { index: compared, fields: vec![field.to_owned()], recorded: r, replayed: p });
+        first_difference =
+            Some(Difference { index: compared, fields: vec![field.to_owned()], recorded: r, replayed: p });
     }
     Ok(ReplayReport {
         datagrams: session.observations.len(),

@@ -86,14 +86,15 @@ impl Recorder {
             .chunk_size(Some(CHUNK_SIZE));
         let mut writer = options.create(SyncFile { inner: BufWriter::new(file) }).map_err(mcap_err)?;
 
-        let now_unix_ns = std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .map_or(0, |d| d.as_nanos() as u64);
+        let now_unix_ns =
+            std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_nanos() as u64);
         let mut meta = BTreeMap::new();
         meta.insert("version".to_owned(), env!("CARGO_PKG_VERSION").to_owned());
         meta.insert("clock".to_owned(), "log times: the daemon's monotonic clock, ns since its start".to_owned());
         meta.insert("created_unix_ns".to_owned(), now_unix_ns.to_string());
-        writer.write_metadata(&mcap::records::Metadata { name: PROFILE.to_owned(), metadata: meta }).map_err(mcap_err)?;
+        writer
+            .write_metadata(&mcap::records::Metadata { name: PROFILE.to_owned(), metadata: meta })
+            .map_err(mcap_err)?;
         let attach = |w: &mut mcap::Writer<SyncFile>, name: String, text: &str| {
             w.attach(&mcap::Attachment {
                 log_time: 0,
