@@ -20,6 +20,9 @@
 //! - [`calib`]: the calibration files in `calib/`.
 //! - [`data`]: real recorded trajectories (MPI launcher set), their frame,
 //!   and the real-data evaluation and calibration harness.
+//! - [`config`]: the daemon's layered, validated configuration.
+//! - [`record`]: session recording (MCAP) and bit-exact replay.
+//! - [`systemd`]: readiness and watchdog notifications for the service.
 //! - [`cli`]: the `topspin` command line.
 
 pub mod calib;

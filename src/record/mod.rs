@@ -139,11 +139,20 @@ pub fn from_hex(s: &str) -> Option<Vec<u8>> {
     s.as_bytes().chunks(2).map(|p| Some(nibble(p[0])? << 4 | nibble(p[1])?)).collect()
 }
 
+/// JSON has no NaN or infinities (serde_json writes null): read null back as NaN.
+/// The exact values are in [`PlanMsg::f64_bits`].
+fn nan_if_null<'de, D: serde::Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+    Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::NAN))
+}
+
 /// A vector as Foxglove plots it.
 #[derive(Copy, Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct XyzMsg {
+    #[serde(deserialize_with = "nan_if_null")]
     pub x: f64,
+    #[serde(deserialize_with = "nan_if_null")]
     pub y: f64,
+    #[serde(deserialize_with = "nan_if_null")]
     pub z: f64,
 }
 
@@ -203,12 +212,14 @@ pub struct PlanMsg {
     pub made_at_ns: u64,
     pub hit_time_ns: u64,
     /// hit_time − made_at, s (for plots).
+    #[serde(deserialize_with = "nan_if_null")]
     pub lead_s: f64,
     pub position: XyzMsg,
     pub velocity: XyzMsg,
     pub orientation: EulerMsg,
     /// rad/s.
     pub spin: XyzMsg,
+    #[serde(deserialize_with = "nan_if_null")]
     pub confidence: f64,
     /// The IEEE bits of the 13 floats (see the module doc), 16 hex digits each.
     pub f64_bits: Vec<String>,
@@ -217,8 +228,11 @@ pub struct PlanMsg {
 /// Bat orientation, KUKA ZYX Euler angles in radians.
 #[derive(Copy, Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct EulerMsg {
+    #[serde(deserialize_with = "nan_if_null")]
     pub a: f64,
+    #[serde(deserialize_with = "nan_if_null")]
     pub b: f64,
+    #[serde(deserialize_with = "nan_if_null")]
     pub c: f64,
 }
 
@@ -338,7 +352,54 @@ impl RsiMsg {
 /// JSON Schemas of the channels (draft 2020-12), for Foxglove.
 pub mod schema {
     pub const DATAGRAM: &str = r#"{"$schema":"https://json-schema.org/draft/2020-12/schema","title":"topspin.TrackerDatagram","description":"One UDP datagram from the tracker (TTB1, DESIGN 5.1) as it arrived","type":"object","properties":{"arrival_ns":{"type":"integer","description":"arrival, daemon monotonic clock, ns"},"from":{"type":"string","description":"sender IP:PORT"},"hex":{"type":"string","description":"the datagram's bytes, lower-case hex"},"observation":{"description":"decoded TTB1 fields, null if the datagram does not parse","anyOf":[{"type":"null"},{"type":"object","properties":{"seq":{"type":"integer"},"capture_ns":{"type":"integer","description":"tracker clock"},"x":{"type":"number"},"y":{"type":"number"},"z":{"type":"number"},"residual":{"type":["number","null"]},"cameras":{"type":"integer"},"valid":{"type":"boolean"}}}]}},"required":["arrival_ns","from","hex","observation"]}"#;
-    pub const PLAN: &str = r#"{"$schema":"https://json-schema.org/draft/2020-12/schema","title":"topspin.StrikePlan","description":"A strike plan the estimator published; table frame, SI units","type":"object","properties":{"seq":{"type":"integer"},"trajectory":{"type":"integer"},"made_at_ns":{"type":"integer"},"hit_time_ns":{"type":"integer"},"lead_s":{"type":"number"},"position":{"type":"object","properties":{"x":{"type":"number"},"y":{"type":"number"},"z":{"type":"number"}},"required":["x","y","z"]},"velocity":{"type":"object","properties":{"x":{"type":"number"},"y":{"type":"number"},"z":{"type":"number"}},"required":["x","y","z"]},"orientation":{"type":"object","properties":{"a":{"type":"number"},"b":{"type":"number"},"c":{"type":"number"}},"required":["a","b","c"]},"spin":{"type":"object","properties":{"x":{"type":"number"},"y":{"type":"number"},"z":{"type":"number"}},"required":["x","y","z"]},"confidence":{"type":"number"},"f64_bits":{"type":"array","description":"IEEE bits of position xyz, velocity xyz, orientation abc, spin xyz, confidence (16 hex digits each)","items":{"type":"string"},"minItems":13,"maxItems":13}},"required":["seq","trajectory","made_at_ns","hit_time_ns","position","velocity","orientation","spin","confidence","f64_bits"]}"#;
+    pub const PLAN: &str = r#"{"$schema":"https://json-schema.org/draft/2020-12/schema","title":"topspin.StrikePlan","description":"A strike plan the estimator published; table frame, SI units; a null number is NaN or infinite (exact values in f64_bits)","type":"object","properties":{"seq":{"type":"integer"},"trajectory":{"type":"integer"},"made_at_ns":{"type":"integer"},"hit_time_ns":{"type":"integer"},"lead_s":{"type":["number","null"]},"position":{"type":"object","properties":{"x":{"type":["number","null"]},"y":{"type":["number","null"]},"z":{"type":["number","null"]}},"required":["x","y","z"]},"velocity":{"type":"object","properties":{"x":{"type":["number","null"]},"y":{"type":["number","null"]},"z":{"type":["number","null"]}},"required":["x","y","z"]},"orientation":{"type":"object","properties":{"a":{"type":["number","null"]},"b":{"type":["number","null"]},"c":{"type":["number","null"]}},"required":["a","b","c"]},"spin":{"type":"object","properties":{"x":{"type":["number","null"]},"y":{"type":["number","null"]},"z":{"type":["number","null"]}},"required":["x","y","z"]},"confidence":{"type":["number","null"]},"f64_bits":{"type":"array","description":"IEEE bits of position xyz, velocity xyz, orientation abc, spin xyz, confidence (16 hex digits each)","items":{"type":"string"},"minItems":13,"maxItems":13}},"required":["seq","trajectory","made_at_ns","hit_time_ns","position","velocity","orientation","spin","confidence","f64_bits"]}"#;
     pub const RSI: &str = r#"{"$schema":"https://json-schema.org/draft/2020-12/schema","title":"topspin.RsiExchange","description":"One RSI exchange: the KR C4's datagram and our answer","type":"object","properties":{"arrival_ns":{"type":"integer"},"sent_ns":{"type":"integer"},"request":{"type":"string","description":"the controller's XML"},"request_hex":{"type":"string","description":"instead of request when not UTF-8"},"answer":{"type":"string","description":"our XML"},"answer_hex":{"type":"string","description":"instead of answer when not UTF-8"}},"required":["arrival_ns","sent_ns"]}"#;
     pub const COUNTERS: &str = r#"{"$schema":"https://json-schema.org/draft/2020-12/schema","title":"topspin.Counters","description":"The daemon's counters (ingest, estimator, rsi, rings), as the telemetry thread sends them","type":"object"}"#;
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    #[test]
+    fn hex_round_trips_and_rejects_non_hex() {
+        assert_eq!(to_hex(&[0, 0xab, 0x7f]), "00ab7f");
+        assert_eq!(from_hex("00AB7f"), Some(vec![0, 0xab, 0x7f]));
+        assert_eq!(from_hex("0"), None);
+        assert_eq!(from_hex("zz"), None);
+        assert_eq!(from_hex("é0"), None);
+    }
+
+    fn plan(v: f64) -> StrikePlan {
+        StrikePlan {
+            seq: 3,
+            trajectory: 2,
+            made_at: Instant(10),
+            hit_time: Instant(u64::MAX),
+            position: Vec3::new(v, -0.0, f64::MIN_POSITIVE / 2.0),
+            velocity: Vec3::new(f64::NAN, f64::INFINITY, 1e300),
+            orientation: EulerZyx { a: 0.1, b: 0.2, c: 0.3 },
+            spin: Vec3::new(1.0 / 3.0, 2.0, 3.0),
+            confidence: 0.5,
+        }
+    }
+
+    proptest! {
+        #[test]
+        fn plans_round_trip_bit_for_bit_through_json(v in any::<f64>()) {
+            let p = plan(v);
+            let json = serde_json::to_vec(&PlanMsg::from(&p)).unwrap();
+            let back = serde_json::from_slice::<PlanMsg>(&json).unwrap().to_plan().unwrap();
+            prop_assert!(replay::differing_fields(&p, &back).is_empty());
+        }
+
+        #[test]
+        fn rsi_bytes_round_trip(req in prop::collection::vec(any::<u8>(), 0..64), ans in ".{0,20}") {
+            let m = RsiMsg::new(Instant(1), &req, ans.as_bytes(), Instant(2));
+            let back: RsiMsg = serde_json::from_slice(&serde_json::to_vec(&m).unwrap()).unwrap();
+            prop_assert_eq!(back.request_bytes().unwrap(), req);
+            prop_assert_eq!(back.answer_bytes().unwrap(), ans.as_bytes());
+        }
+    }
 }
