@@ -23,10 +23,14 @@
 //! - [`logo`]: spin from the ball's printed logo in ceiling-camera crops
 //!   (background subtraction, circular-segment correction, rotation fit).
 //! - [`render`]: the ceiling-camera renderer, labelled synthetic crops.
+//! - [`config`]: the daemon's layered, validated configuration.
+//! - [`record`]: session recording (MCAP) and bit-exact replay.
+//! - [`systemd`]: readiness and watchdog notifications for the service.
 //! - [`cli`]: the `topspin` command line.
 
 pub mod calib;
 pub mod cli;
+pub mod config;
 pub mod data;
 pub mod demo;
 pub mod estimator;
@@ -38,9 +42,11 @@ pub mod mock_krc;
 pub mod motion;
 pub mod physics;
 pub mod plan;
+pub mod record;
 pub mod render;
 pub mod rsi;
 pub mod runtime;
 pub mod sim;
+pub mod systemd;
 pub mod time;
 pub mod wire;

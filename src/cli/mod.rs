@@ -11,6 +11,7 @@ pub mod fit;
 pub mod logo;
 pub mod mock_krc;
 pub mod render;
+pub mod replay;
 pub mod replay_stream;
 pub mod sim;
 
@@ -50,6 +51,8 @@ pub enum Command {
     /// Spin from a sequence of ball crops (the logo, background
     /// subtraction), or `--eval` on rendered sequences.
     Logo(logo::LogoArgs),
+    /// Re-run a recorded session (MCAP) and compare its plans bit for bit.
+    Replay(replay::ReplayArgs),
 }
 
 /// Runs the command line; returns the process exit code.
@@ -63,6 +66,7 @@ pub fn main() -> i32 {
         Command::MockKrc(a) => mock_krc::run(a),
         Command::Render(a) => render::run(a),
         Command::Logo(a) => logo::run(a),
+        Command::Replay(a) => replay::run(a),
     };
     match result {
         Ok(()) => 0,
