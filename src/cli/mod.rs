@@ -13,6 +13,7 @@ pub mod mock_krc;
 pub mod render;
 pub mod replay;
 pub mod replay_stream;
+pub mod run;
 pub mod sim;
 
 /// Exit code for unusable input (files, configuration, arguments).
@@ -33,6 +34,8 @@ pub struct Cli {
 #[derive(Debug, Subcommand)]
 #[allow(clippy::large_enum_variant)] // parsed once at start-up
 pub enum Command {
+    /// The daemon: tracker in, RSI to the KR C4 out (systemd service).
+    Run(run::RunArgs),
     /// Simulate launcher balls seen by the tracker: CSV + ground truth, or a
     /// live UDP stream.
     Sim(sim::SimArgs),
@@ -59,6 +62,7 @@ pub enum Command {
 pub fn main() -> i32 {
     let cli = Cli::parse();
     let result = match cli.command {
+        Command::Run(a) => run::run(a),
         Command::Sim(a) => sim::run(a),
         Command::Fit(a) => fit::run(a),
         Command::Demo(a) => demo::run(a),

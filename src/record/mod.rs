@@ -47,6 +47,7 @@
 
 mod reader;
 pub mod replay;
+pub mod sink;
 mod writer;
 
 use serde::{Deserialize, Serialize};

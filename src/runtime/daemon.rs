@@ -6,8 +6,9 @@
 //! where configured and permitted (refusals become warnings).
 //!
 //! Shutdown: `request_stop` stops ingest and estimator at once; the RSI
-//! loop keeps answering until the bat is home and at rest (or the robot is
-//! silent, or never came), then ends; telemetry drains last.
+//! loop finishes the stroke under way, brings the bat home and keeps
+//! answering until the controller stops sending (or never came), then
+//! ends; telemetry drains last.
 
 use std::io;
 use std::net::{IpAddr, SocketAddr, UdpSocket};
@@ -37,9 +38,8 @@ pub const MAX_TRACKER_DATAGRAM: usize = 512;
 pub const INGEST_POLL: std::time::Duration = std::time::Duration::from_millis(20);
 /// The estimator's idle wait when it blocks (it is unparked by ingest).
 pub const ESTIMATOR_PARK: std::time::Duration = std::time::Duration::from_millis(5);
-/// Once home after a stop request, keep answering this long before ending.
-pub const HOME_GRACE: Duration = Duration::from_millis(200);
-/// Longest drain after a stop request.
+/// Longest drain after a stop request (the systemd unit's TimeoutStopSec
+/// must exceed it).
 pub const MAX_DRAIN: Duration = Duration::from_millis(5000);
 
 /// Called first thing on every daemon thread with its role ("ingest",
@@ -275,26 +275,22 @@ impl Daemon {
         self.stop.store(true, Ordering::Release);
     }
 
-    /// Waits for the drain (bat home, robot silent or absent, at most
-    /// [`MAX_DRAIN`]) and for every thread; returns what they saw.
+    /// Waits for the drain — the bat home and the controller stopped
+    /// (silent), or no robot at all, or at most [`MAX_DRAIN`] — and for
+    /// every thread; returns what they saw.
     pub fn join(self) -> io::Result<DaemonSummary> {
         self.request_stop();
         let t0 = runtime::now();
-        let mut home_since: Option<Instant> = None;
+        let mut home = false;
         let ended_home = loop {
-            let now = runtime::now();
             match self.link_state() {
-                LinkState::NoRobot | LinkState::Silent => break true,
-                LinkState::Home => {
-                    let since = *home_since.get_or_insert(now);
-                    if now - since >= HOME_GRACE {
-                        break true;
-                    }
-                }
-                LinkState::Moving => home_since = None,
+                LinkState::NoRobot => break true,
+                LinkState::Silent => break home,
+                LinkState::Home => home = true,
+                LinkState::Moving => home = false,
             }
-            if now - t0 >= MAX_DRAIN {
-                break false;
+            if runtime::now() - t0 >= MAX_DRAIN {
+                break home;
             }
             std::thread::sleep(std::time::Duration::from_millis(2));
         };

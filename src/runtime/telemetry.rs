@@ -19,6 +19,9 @@ use crate::time::Instant;
 
 /// Capacity of each thread's telemetry ring, events.
 pub const TELEMETRY_RING: usize = 8192;
+/// Seconds between flushes of the sink (the session file: what is flushed
+/// survives a crash of the process).
+pub const FLUSH_INTERVAL_S: f64 = 1.0;
 /// Bytes of each received datagram kept for the recording.
 pub const RECORDED_DATAGRAM: usize = 64;
 /// Bytes of each RSI request and answer kept for the recording.
@@ -209,6 +212,7 @@ pub fn run(
     let TelemetryInputs { mut rings, mut rsi_bytes, log_interval, mut sink } = inputs;
     let mut s = TelemetrySummary::new();
     let mut next_log = now().as_secs_f64() + log_interval;
+    let mut next_flush = now().as_secs_f64() + FLUSH_INTERVAL_S;
     loop {
         let stopping = stop.load(Ordering::Acquire);
         let mut any = false;
@@ -235,6 +239,12 @@ pub fn run(
             tracing::info!(target: "topspin::telemetry", "{json}");
             if let Some(k) = sink.as_deref_mut() {
                 k.counters(&json, t);
+                k.flush();
+            }
+        }
+        if t.as_secs_f64() >= next_flush {
+            next_flush = t.as_secs_f64() + FLUSH_INTERVAL_S;
+            if let Some(k) = sink.as_mut() {
                 k.flush();
             }
         }

@@ -1,0 +1,129 @@
+//! `topspin run`: the daemon (DESIGN §4). Configuration from the layers of
+//! `config`, calibration from `calib.dir`, the threads of
+//! `runtime::daemon`, the session recording if enabled, systemd readiness
+//! and watchdog, and a clean stop on SIGTERM/SIGINT: the bat is brought
+//! home and answered until the controller stops, then everything ends.
+//! Exit code 0 after a signal, 1 if the daemon failed, 2 for unusable
+//! configuration or calibration.
+
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+use clap::Args;
+
+use super::BadInput;
+use crate::calib::Calibration;
+use crate::config::{DaemonConfig, RsiWait};
+use crate::record::sink::RecordingSink;
+use crate::record::{Recorder, calib_files};
+use crate::rsi::server::WaitStrategy;
+use crate::runtime::daemon::{Daemon, RuntimeConfig, ThreadSpec};
+use crate::runtime::telemetry::TelemetrySink;
+use crate::systemd::Notifier;
+use crate::time::Duration;
+
+#[derive(Debug, Args)]
+pub struct RunArgs {
+    /// Configuration file (over /etc/topspin/topspin.toml, under TOPSPIN_* variables).
+    #[arg(long, value_name = "FILE")]
+    pub config: Option<PathBuf>,
+    /// Print the effective configuration and exit.
+    #[arg(long)]
+    pub print_config: bool,
+}
+
+/// The threads' settings from the daemon configuration.
+pub fn runtime_config(c: &DaemonConfig) -> RuntimeConfig {
+    let t = &c.threads;
+    let spec = |core: crate::config::Core, priority: u8| ThreadSpec { core: core.0, priority: Some(priority as i32) };
+    RuntimeConfig {
+        tracker_bind: c.network.tracker_bind,
+        tracker_source: Some(c.network.tracker_source),
+        rsi_bind: c.network.rsi_bind,
+        controller_source: Some(c.network.controller_source),
+        realtime: t.realtime,
+        ingest: spec(t.ingest_core, t.ingest_priority),
+        estimator: spec(t.estimator_core, t.estimator_priority),
+        rsi: spec(t.rsi_core, t.rsi_priority),
+        telemetry: ThreadSpec { core: t.telemetry_core.0, priority: None },
+        rsi_wait: match t.rsi_wait {
+            RsiWait::Blocking => WaitStrategy::Blocking,
+            RsiWait::BusyPoll => WaitStrategy::BusyPoll,
+        },
+        estimator_busy_poll: false,
+        tracker_noise: c.tracker_noise_m(),
+        tracker_fixed_latency: Duration::from_nanos(c.fixed_latency_ns()),
+        sentype: c.rsi.sentype.clone(),
+        log_interval_s: c.telemetry.log_interval_s,
+        record_rsi: c.recording.enabled,
+    }
+}
+
+fn init_logging(level: &str) {
+    let filter = tracing_subscriber::EnvFilter::try_from_env("TOPSPIN_LOG")
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(format!("topspin={level}")));
+    let _ = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).try_init();
+}
+
+pub fn run(a: RunArgs) -> anyhow::Result<()> {
+    let cfg = DaemonConfig::load(a.config.as_deref()).map_err(|e| BadInput(e.to_string()))?;
+    if a.print_config {
+        print!("{}", cfg.to_toml());
+        return Ok(());
+    }
+    let cal = Calibration::load(cfg.calib.dir()).map_err(|e| BadInput(e.to_string()))?;
+    init_logging(&cfg.telemetry.log_level);
+    let sink: Option<Box<dyn TelemetrySink>> = if cfg.recording.enabled {
+        let dir = &cfg.recording.dir;
+        std::fs::create_dir_all(dir).map_err(|e| BadInput(format!("recording.dir {}: {e}", dir.display())))?;
+        let stamp = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_secs());
+        let path = dir.join(format!("topspin-{stamp}.mcap"));
+        let files = calib_files(cfg.calib.dir()).map_err(|e| BadInput(e.to_string()))?;
+        let rec = Recorder::create(&path, &cfg, &files).map_err(|e| BadInput(e.to_string()))?;
+        tracing::info!(target: "topspin", "recording to {}", path.display());
+        Some(Box::new(RecordingSink::new(rec)))
+    } else {
+        None
+    };
+    let daemon =
+        Daemon::start(&runtime_config(&cfg), &cal, sink).map_err(|e| anyhow::anyhow!("starting the daemon: {e}"))?;
+    tracing::info!(
+        target: "topspin",
+        "running: tracker datagrams on {}, RSI on {}",
+        daemon.tracker_addr,
+        daemon.rsi_addr
+    );
+    let term = Arc::new(AtomicBool::new(false));
+    for sig in [signal_hook::consts::SIGTERM, signal_hook::consts::SIGINT] {
+        signal_hook::flag::register(sig, term.clone())?;
+    }
+    let notify = Notifier::from_env();
+    let _ = notify.ready();
+    let watchdog = notify.watchdog_interval().map(|d| d / 2);
+    let mut last_ping = std::time::Instant::now();
+    let mut warned = 0;
+    while !term.load(Ordering::Relaxed) {
+        std::thread::sleep(std::time::Duration::from_millis(50));
+        for w in daemon.warnings().iter().skip(warned) {
+            tracing::warn!(target: "topspin", "{w}");
+            warned += 1;
+        }
+        if let Some(every) = watchdog
+            && last_ping.elapsed() >= every
+        {
+            let _ = notify.watchdog();
+            last_ping = std::time::Instant::now();
+        }
+    }
+    tracing::info!(target: "topspin", "stopping: bringing the bat home");
+    let _ = notify.stopping();
+    let summary = daemon.join().map_err(|e| anyhow::anyhow!("stopping the daemon: {e}"))?;
+    tracing::info!(
+        target: "topspin",
+        ended_home = summary.ended_home,
+        "stopped: {}",
+        summary.telemetry.to_json()
+    );
+    Ok(())
+}
