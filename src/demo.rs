@@ -137,8 +137,26 @@ fn reachable(cal: &Calibration, ball: &SimBall) -> bool {
     })
 }
 
-/// Runs the demo end to end.
+/// What one loopback session produced, before judging.
+#[derive(Debug)]
+pub struct LoopbackRun {
+    pub balls: Vec<SimBall>,
+    /// Launch of ball k, s after `t0`.
+    pub starts: Vec<f64>,
+    pub t0: Instant,
+    pub mock: mock_krc::MockResult,
+    pub daemon: DaemonSummary,
+}
+
+/// Runs the demo end to end and judges every stroke.
 pub fn run(cfg: &DemoConfig, cal: &Calibration) -> std::io::Result<DemoReport> {
+    let r = run_loopback(cfg, cal)?;
+    Ok(judge(cal, &r.balls, &r.starts, r.t0, &r.mock, &r.daemon))
+}
+
+/// The simulated tracker, the daemon threads and the mock KR C4 on
+/// loopback for `cfg.balls` balls; the bat brought home at the end.
+pub fn run_loopback(cfg: &DemoConfig, cal: &Calibration) -> std::io::Result<LoopbackRun> {
     let prop = cal.propagator();
     let balls: Vec<SimBall> = (0..cfg.balls)
         .filter_map(|k| {
@@ -187,9 +205,9 @@ pub fn run(cfg: &DemoConfig, cal: &Calibration) -> std::io::Result<DemoReport> {
         }
         std::thread::sleep(std::time::Duration::from_millis(2));
     }
-    let mock_result = mock.stop()?;
-    let summary = daemon.join()?;
-    Ok(judge(cal, &balls, &starts, t0, &mock_result, &summary))
+    let mock = mock.stop()?;
+    let daemon = daemon.join()?;
+    Ok(LoopbackRun { balls, starts, t0, mock, daemon })
 }
 
 /// The last plan of the trajectory whose hit is nearest the true one.

@@ -4,6 +4,7 @@
 
 use clap::{Parser, Subcommand};
 
+pub mod bench;
 pub mod demo;
 pub mod eval;
 pub mod eval_real;
@@ -43,6 +44,9 @@ pub enum Command {
     Demo(demo::DemoArgs),
     /// Spin and prediction for one recorded trajectory (CSV t,x,y,z).
     Fit(fit::FitArgs),
+    /// Benchmarks of the running system.
+    #[command(subcommand)]
+    Bench(bench::BenchCommand),
     /// Offline evaluations: accuracy tables on simulated and real flights.
     #[command(subcommand)]
     Eval(eval::EvalCommand),
@@ -67,6 +71,7 @@ pub fn main() -> i32 {
         Command::Fit(a) => fit::run(a),
         Command::Demo(a) => demo::run(a),
         Command::Eval(c) => eval::run(c),
+        Command::Bench(c) => bench::run(c),
         Command::MockKrc(a) => mock_krc::run(a),
         Command::Render(a) => render::run(a),
         Command::Logo(a) => logo::run(a),
