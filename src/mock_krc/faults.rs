@@ -67,7 +67,10 @@ impl Link for UdpLink {
                         return Ok(None);
                     }
                     if deadline - now > SPIN_WINDOW {
-                        std::thread::sleep(std::time::Duration::from_micros(50));
+                        // Sleep in the kernel until a datagram arrives (or
+                        // the spin window): woken by the arrival itself, as a
+                        // controller's NIC would see it, not by a poll timer.
+                        wait_readable(&self.socket, deadline - now - SPIN_WINDOW);
                     } else {
                         std::hint::spin_loop();
                     }
@@ -75,6 +78,20 @@ impl Link for UdpLink {
                 Err(e) => return Err(e),
             }
         }
+    }
+}
+
+/// Blocks until `socket` is readable or `timeout` passed (ppoll: a
+/// nanosecond timeout, woken by the datagram's arrival).
+#[allow(unsafe_code)]
+fn wait_readable(socket: &UdpSocket, timeout: Duration) {
+    use std::os::fd::AsRawFd;
+    let mut fds = libc::pollfd { fd: socket.as_raw_fd(), events: libc::POLLIN, revents: 0 };
+    let ts = libc::timespec { tv_sec: (timeout.0 / 1_000_000_000) as _, tv_nsec: (timeout.0 % 1_000_000_000) as _ };
+    // SAFETY: `fds` points to one valid pollfd for the call's duration, `ts`
+    // is a valid timespec, and a null signal mask leaves the mask unchanged.
+    unsafe {
+        libc::ppoll(&mut fds, 1, &ts, std::ptr::null());
     }
 }
 

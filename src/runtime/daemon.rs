@@ -81,8 +81,9 @@ pub struct RuntimeConfig {
 }
 
 impl RuntimeConfig {
-    /// Everything on loopback with ephemeral ports, no pinning, no
-    /// real-time: for the demo, benches and tests.
+    /// Everything on loopback with ephemeral ports, no pinning, SCHED_FIFO
+    /// for the hot threads where permitted (else warnings and normal
+    /// scheduling): for the demo, benches and tests.
     pub fn loopback() -> Self {
         let lo: SocketAddr = "127.0.0.1:0".parse().expect("literal");
         RuntimeConfig {
@@ -91,9 +92,9 @@ impl RuntimeConfig {
             rsi_bind: lo,
             controller_source: Some(lo.ip()),
             realtime: false,
-            ingest: ThreadSpec::default(),
-            estimator: ThreadSpec::default(),
-            rsi: ThreadSpec::default(),
+            ingest: ThreadSpec { core: None, priority: Some(70) },
+            estimator: ThreadSpec { core: None, priority: Some(60) },
+            rsi: ThreadSpec { core: None, priority: Some(80) },
             telemetry: ThreadSpec::default(),
             rsi_wait: WaitStrategy::Blocking,
             estimator_busy_poll: false,
