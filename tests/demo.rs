@@ -31,10 +31,11 @@ fn thirty_balls_hit_with_no_late_answers() {
         }
     }
     eprintln!(
-        "demo: {} of {} reachable hit, late {}, spin err {:.2}%, hit err {:.1} mm",
+        "demo: {} of {} reachable hit, late {} (answers after one cycle: {}), spin err {:.2}%, hit err {:.1} mm",
         r["hits"],
         r["reachable"],
         r["late_rsi_answers"],
+        r["answers_after_cycle"],
         r["spin_err_pct_median"].as_f64().unwrap(),
         r["hit_err_mm_median"].as_f64().unwrap()
     );
