@@ -144,11 +144,9 @@ pub struct DemoReport {
     pub per_ball: Vec<BallVerdict>,
 }
 
-fn reachable(cal: &Calibration, ball: &SimBall) -> bool {
-    let s = &cal.strike;
-    ball.truth.hit.as_ref().is_some_and(|h| {
-        (s.window_y[0]..=s.window_y[1]).contains(&h.pos[1]) && (s.window_z[0]..=s.window_z[1]).contains(&h.pos[2])
-    })
+/// The ball's true hitting point lies in the hitting window.
+pub fn reachable(cal: &Calibration, ball: &SimBall) -> bool {
+    ball.truth.hit.as_ref().is_some_and(|h| cal.strike.in_window(h.pos[1], h.pos[2]))
 }
 
 /// What one loopback session produced, before judging.

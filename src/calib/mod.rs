@@ -64,6 +64,13 @@ pub struct StrikeCalib {
     pub c_per_y_deg: f64,
 }
 
+impl StrikeCalib {
+    /// True when a hitting point at (y, z) lies in the hitting window.
+    pub fn in_window(&self, y: f64, z: f64) -> bool {
+        (self.window_y[0]..=self.window_y[1]).contains(&y) && (self.window_z[0]..=self.window_z[1]).contains(&z)
+    }
+}
+
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct StrikeFile {
@@ -175,21 +182,28 @@ impl Calibration {
         let (text, path) = read_or_default(dir, "robot.toml", DEFAULT_ROBOT)?;
         let robot = parse::<RobotFile>(&text, &path)?;
         robot.validate().map_err(|b| CalibError::OutOfRange { path: path.clone(), key: b.key, value: b.value })?;
-        // The hitting window must lie inside the robot's workspace.
-        for (y, z) in [(strike.window_y[0], strike.window_z[0]), (strike.window_y[1], strike.window_z[1])] {
-            let p = robot.t_to_b(crate::physics::Vec3::new(strike.hit_plane_x, y, z));
-            if (0..3).any(|i| p[i] < robot.workspace.min_xyz_m[i] || p[i] > robot.workspace.max_xyz_m[i]) {
-                return Err(CalibError::OutOfRange {
-                    path: path.clone(),
-                    key: "strike.window_y/window_z (outside robot workspace)",
-                    value: if (0..3)
-                        .any(|i| i == 1 && (p[1] < robot.workspace.min_xyz_m[1] || p[1] > robot.workspace.max_xyz_m[1]))
-                    {
-                        y
+        // The hitting window's corners must lie inside the robot's workspace
+        // (the base may be yawed, so check all four).
+        let ws = &robot.workspace;
+        let inside = |p: crate::physics::Vec3| (0..3).all(|i| (ws.min_xyz_m[i]..=ws.max_xyz_m[i]).contains(&p[i]));
+        for y in strike.window_y {
+            for z in strike.window_z {
+                if !inside(robot.t_to_b(crate::physics::Vec3::new(strike.hit_plane_x, y, z))) {
+                    let key = if inside(robot.t_to_b(crate::physics::Vec3::new(
+                        strike.hit_plane_x,
+                        y,
+                        0.5 * (strike.window_z[0] + strike.window_z[1]),
+                    ))) {
+                        "strike.window_z (outside the robot's workspace)"
                     } else {
-                        z
-                    },
-                });
+                        "strike.window_y (outside the robot's workspace)"
+                    };
+                    return Err(CalibError::OutOfRange {
+                        path: path.clone(),
+                        key,
+                        value: if key.contains("window_z") { z } else { y },
+                    });
+                }
             }
         }
         // The hitting plane must cross the robot's workspace.
@@ -238,6 +252,13 @@ mod tests {
             .unwrap();
         let e = Calibration::load(Some(&dir)).unwrap_err().to_string();
         assert!(e.contains("hit_plane"), "{e}");
+        std::fs::write(
+            dir.join("strike.toml"),
+            DEFAULT_STRIKE.replace("window_y = [-0.60, 0.60]", "window_y = [-0.90, 0.60]"),
+        )
+        .unwrap();
+        let e = Calibration::load(Some(&dir)).unwrap_err().to_string();
+        assert!(e.contains("strike.window_y") && e.contains("workspace"), "{e}");
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }

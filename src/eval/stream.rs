@@ -141,16 +141,7 @@ pub fn evaluate(cal: &Calibration, setup: &StreamSetup) -> StreamReport {
     let window = run_estimator(cal, EstimatorConfig { spin_source: SpinSource::WindowFit, ..base }, &balls, &launches);
     let paper = FitConfig::new(Method::Paper, cal.strike.hit_plane_x).with_noise(noise);
     let refined = FitConfig::new(Method::Refined, cal.strike.hit_plane_x).with_noise(noise);
-    let reachable: Vec<bool> = balls
-        .iter()
-        .map(|b| {
-            b.truth.hit.as_ref().is_some_and(|h| {
-                let s = &cal.strike;
-                (s.window_y[0]..=s.window_y[1]).contains(&h.pos[1])
-                    && (s.window_z[0]..=s.window_z[1]).contains(&h.pos[2])
-            })
-        })
-        .collect();
+    let reachable: Vec<bool> = balls.iter().map(|b| crate::demo::reachable(cal, b)).collect();
     let tracked = (0..balls.len()).filter(|&k| reachable[k] && ekf.iter().any(|(b, _)| *b == k)).count();
 
     let at = |when: &dyn Fn(&SimBall) -> Option<f64>| -> [Vec<Option<(f64, f64)>>; 4] {
