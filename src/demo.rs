@@ -20,10 +20,10 @@ use crate::mock_krc::{self, MockKrcConfig};
 use crate::physics::{Vec3, rad_to_rps};
 use crate::plan::StrikePlan;
 use crate::runtime::daemon::{Daemon, DaemonSummary, LinkState, RuntimeConfig};
-use crate::runtime::telemetry::TelemetrySummary;
+pub use crate::runtime::telemetry::{Latencies, Latency};
 use crate::runtime::{self};
 use crate::sim::stream::{capture_time, stream};
-use crate::sim::{Setting, SimBall, TrackerModel, schedule, simulate_ball, true_state_at};
+use crate::sim::{SimBall, TrackerModel, schedule, true_state_at};
 use crate::time::{Duration, Instant};
 
 /// A stroke hits when the bat centre passes this close to the ball, m.
@@ -83,41 +83,6 @@ pub struct BallVerdict {
     pub hit: bool,
 }
 
-/// Percentiles of a latency histogram, µs.
-#[derive(Copy, Clone, Debug, Serialize)]
-pub struct Latency {
-    pub p50: u64,
-    pub p99: u64,
-    pub p999: u64,
-    pub max: u64,
-    pub n: u64,
-}
-
-impl Latency {
-    pub fn of(h: &hdrhistogram::Histogram<u64>) -> Self {
-        Latency {
-            p50: h.value_at_quantile(0.5),
-            p99: h.value_at_quantile(0.99),
-            p999: h.value_at_quantile(0.999),
-            max: h.max(),
-            n: h.len(),
-        }
-    }
-}
-
-/// Both latency histograms.
-#[derive(Copy, Clone, Debug, Serialize)]
-pub struct Latencies {
-    pub rsi_answer: Latency,
-    pub obs_to_plan: Latency,
-}
-
-impl Latencies {
-    pub fn of(t: &TelemetrySummary) -> Self {
-        Latencies { rsi_answer: Latency::of(&t.rsi_answer_us), obs_to_plan: Latency::of(&t.obs_to_plan_us) }
-    }
-}
-
 /// The demo's result.
 #[derive(Clone, Debug, Serialize)]
 pub struct DemoReport {
@@ -169,12 +134,7 @@ pub fn run(cfg: &DemoConfig, cal: &Calibration) -> std::io::Result<DemoReport> {
 /// The simulated tracker, the daemon threads and the mock KR C4 on
 /// loopback for `cfg.balls` balls; the bat brought home at the end.
 pub fn run_loopback(cfg: &DemoConfig, cal: &Calibration) -> std::io::Result<LoopbackRun> {
-    let prop = cal.propagator();
-    let balls: Vec<SimBall> = (0..cfg.balls)
-        .filter_map(|k| {
-            simulate_ball(cfg.seed, k, Setting::ALL[k % 9], &prop, cal.strike.hit_plane_x, &cfg.tracker).ok()
-        })
-        .collect();
+    let balls = crate::eval::simulate_set(cal, cfg.seed, cfg.balls, &cfg.tracker);
     let ends: Vec<f64> = balls.iter().map(|b| b.truth.end_t).collect();
     let starts = schedule(&ends, cfg.gap);
 

@@ -10,6 +10,7 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 
 use hdrhistogram::Histogram;
 use rtrb::{Consumer, Producer};
+use serde::Serialize;
 
 use crate::estimator::EstimatorEvent;
 use crate::ingest::{Dropped, IngestCounters};
@@ -106,6 +107,42 @@ pub trait TelemetrySink: Send {
     fn flush(&mut self) {}
 }
 
+/// Percentiles of a latency histogram, µs.
+#[derive(Copy, Clone, Debug, Serialize)]
+pub struct Latency {
+    pub p50: u64,
+    pub p99: u64,
+    pub p999: u64,
+    pub max: u64,
+    pub n: u64,
+}
+
+impl Latency {
+    pub fn of(h: &hdrhistogram::Histogram<u64>) -> Self {
+        Latency {
+            p50: h.value_at_quantile(0.5),
+            p99: h.value_at_quantile(0.99),
+            p999: h.value_at_quantile(0.999),
+            max: h.max(),
+            n: h.len(),
+        }
+    }
+}
+
+/// Both latency histograms.
+#[derive(Copy, Clone, Debug, Serialize)]
+pub struct Latencies {
+    pub rsi_answer: Latency,
+    pub obs_to_plan: Latency,
+}
+
+impl Latencies {
+    /// Both histograms of a telemetry summary.
+    pub fn of(t: &TelemetrySummary) -> Self {
+        Latencies { rsi_answer: Latency::of(&t.rsi_answer_us), obs_to_plan: Latency::of(&t.obs_to_plan_us) }
+    }
+}
+
 /// What the telemetry thread has seen; returned at the end.
 #[derive(Debug)]
 pub struct TelemetrySummary {
@@ -149,17 +186,6 @@ impl TelemetrySummary {
         }
     }
 
-    /// p50/p99/p99.9/max of a histogram as JSON.
-    pub fn percentiles(h: &Histogram<u64>) -> serde_json::Value {
-        serde_json::json!({
-            "p50": h.value_at_quantile(0.5),
-            "p99": h.value_at_quantile(0.99),
-            "p999": h.value_at_quantile(0.999),
-            "max": h.max(),
-            "n": h.len(),
-        })
-    }
-
     pub fn to_json(&self) -> serde_json::Value {
         serde_json::json!({
             "datagrams": self.datagrams,
@@ -171,10 +197,7 @@ impl TelemetrySummary {
             "plans_rejected": self.plans_rejected,
             "telemetry_dropped": self.telemetry_dropped,
             "ingest": self.ingest,
-            "latency_us": {
-                "obs_to_plan": Self::percentiles(&self.obs_to_plan_us),
-                "rsi_answer": Self::percentiles(&self.rsi_answer_us),
-            },
+            "latency_us": Latencies::of(self),
         })
     }
 }
