@@ -199,6 +199,37 @@ pub struct RecordingConfig {
     pub dir: PathBuf,
 }
 
+/// How the logo thread finds the logo.
+#[derive(Copy, Clone, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+pub enum LogoMethodConfig {
+    /// The network of `logo.model` (paper §III).
+    Cnn,
+    /// Background subtraction with the segment correction (paper §II).
+    Background,
+}
+
+/// `[logo]`: the optional logo thread (spin from the ball's logo in the
+/// ceiling camera's crops, fused into the estimator's spin).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LogoConfig {
+    pub enabled: bool,
+    /// Where the logo thread receives TTI1 crop datagrams.
+    #[serde(deserialize_with = "socket_addr")]
+    pub crops_bind: SocketAddr,
+    /// Only crops from this IP are accepted.
+    #[serde(deserialize_with = "ip_addr")]
+    pub crops_source: IpAddr,
+    pub method: LogoMethodConfig,
+    /// The ONNX model; empty: `models/logo-compact.onnx` (see README).
+    pub model: PathBuf,
+    /// `auto` (ONNX Runtime when ORT_DYLIB_PATH names it, else tract),
+    /// `tract` or `onnxruntime`.
+    pub backend: crate::logo::cnn::Backend,
+    /// The logo thread's core (give it one of its own).
+    pub core: Core,
+}
+
 /// `[calib]`: which calibration.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -225,6 +256,7 @@ pub struct DaemonConfig {
     pub telemetry: TelemetryConfig,
     pub recording: RecordingConfig,
     pub calib: CalibConfig,
+    pub logo: LogoConfig,
 }
 
 impl Default for DaemonConfig {
@@ -253,6 +285,15 @@ impl Default for DaemonConfig {
             telemetry: TelemetryConfig { log_interval_s: 10.0, log_level: "info".to_owned() },
             recording: RecordingConfig { enabled: false, dir: PathBuf::from("/var/lib/topspin") },
             calib: CalibConfig { dir: PathBuf::new() },
+            logo: LogoConfig {
+                enabled: false,
+                crops_bind: SocketAddr::new(lo, 41001),
+                crops_source: lo,
+                method: LogoMethodConfig::Cnn,
+                model: PathBuf::new(),
+                backend: crate::logo::cnn::Backend::Auto,
+                core: Core(None),
+            },
         }
     }
 }
@@ -347,6 +388,7 @@ impl DaemonConfig {
             ("threads.estimator_core", t.estimator_core),
             ("threads.rsi_core", t.rsi_core),
             ("threads.telemetry_core", t.telemetry_core),
+            ("logo.core", self.logo.core),
         ] {
             if let Some(c) = core.0
                 && c > MAX_CORE
@@ -387,7 +429,22 @@ impl DaemonConfig {
         if self.recording.dir.as_os_str().is_empty() {
             return Err(invalid("recording.dir", "is empty"));
         }
+        let l = &self.logo;
+        if l.crops_bind.port() == 0 {
+            return Err(invalid("logo.crops_bind", format!("\"{}\" needs a port (1..=65535)", l.crops_bind)));
+        }
+        if l.crops_source.is_unspecified() || l.crops_source.is_multicast() {
+            return Err(invalid("logo.crops_source", format!("\"{}\" is not a host address", l.crops_source)));
+        }
+        if l.enabled && l.method == LogoMethodConfig::Cnn && !self.logo_model().is_file() {
+            return Err(invalid("logo.model", format!("{} is not a file", self.logo_model().display())));
+        }
         Ok(())
+    }
+
+    /// `logo.model`, or the default model when empty.
+    pub fn logo_model(&self) -> PathBuf {
+        if self.logo.model.as_os_str().is_empty() { crate::logo::cnn::default_model() } else { self.logo.model.clone() }
     }
 
     /// `tracker.noise_mm` in metres (for `EstimatorConfig::with_noise`).

@@ -5,6 +5,11 @@
 //! the table frame) must pass within [`HIT_RADIUS`] of the true ball centre
 //! within ±[`HIT_WINDOW`] of the true crossing of the hitting plane.
 //!
+//! With `runtime.logo` set, the ceiling camera is simulated too: each
+//! ball's crossing of the camera's strip is rendered beforehand and its
+//! crops are streamed as TTI1 datagrams, interleaved in time with the
+//! tracker's, to the daemon's logo thread.
+//!
 //! Balls whose true hitting point lies outside the hitting window
 //! (`calib/strike.toml`) cannot be reached; they are reported, and the hit
 //! rate is over the reachable ones.
@@ -15,16 +20,20 @@ use std::sync::atomic::AtomicBool;
 use serde::Serialize;
 
 use crate::calib::Calibration;
+use crate::calib::camera::CameraCalib;
 use crate::eval::stats::Summary;
+use crate::logo::stream::LogoCounters;
 use crate::mock_krc::{self, MockKrcConfig};
 use crate::physics::{Vec3, rad_to_rps};
 use crate::plan::StrikePlan;
+use crate::render::{BallColour, Scene, Sequence, SequenceOptions, render_sequence};
 use crate::runtime::daemon::{Daemon, DaemonSummary, LinkState, RuntimeConfig};
 pub use crate::runtime::telemetry::{Latencies, Latency};
 use crate::runtime::{self};
 use crate::sim::stream::{capture_time, stream};
 use crate::sim::{SimBall, TrackerModel, schedule, true_state_at};
 use crate::time::{Duration, Instant};
+use crate::wire::crop::{CROP_MAX_LEN, Crop};
 
 /// A stroke hits when the bat centre passes this close to the ball, m.
 pub const HIT_RADIUS: f64 = 0.040;
@@ -105,6 +114,11 @@ pub struct DemoReport {
     pub plans_late: u64,
     pub late_by_max_ms: f64,
     pub plans_rejected: u64,
+    /// The logo thread's counters (with `runtime.logo`), and the logo
+    /// spins the estimator fused or refused.
+    pub logo: Option<LogoCounters>,
+    pub logo_spins_fused: u64,
+    pub logo_spins_gated: u64,
     pub warnings: Vec<String>,
     pub per_ball: Vec<BallVerdict>,
 }
@@ -139,6 +153,10 @@ pub fn run_loopback(cfg: &DemoConfig, cal: &Calibration) -> std::io::Result<Loop
     let starts = schedule(&ends, cfg.gap);
 
     let mut rcfg = cfg.runtime.clone();
+    let crops = rcfg.logo.as_mut().map(|l| {
+        l.camera_latency = Duration::from_nanos((cfg.tracker.latency * 1e9) as u64);
+        render_crops(cal, &l.camera, cfg.seed, &balls)
+    });
     rcfg.tracker_noise = cfg.tracker.noise_sigma.max(1e-4);
     // The simulated tracker's capture-to-arrival latency is known here; on
     // the robot it is measured once and configured (tracker.fixed_latency_ms).
@@ -157,8 +175,20 @@ pub fn run_loopback(cfg: &DemoConfig, cal: &Calibration) -> std::io::Result<Loop
     let tracker = UdpSocket::bind("127.0.0.1:0")?;
     tracker.connect(daemon.tracker_addr)?;
     let t0 = runtime::now() + Duration::from_nanos((LEAD_IN * 1e9) as u64);
+    let camera = match (daemon.crops_addr, &crops) {
+        (Some(addr), Some(seqs)) => {
+            let socket = UdpSocket::bind("127.0.0.1:0")?;
+            socket.connect(addr)?;
+            let (starts, latency, seqs) = (starts.clone(), cfg.tracker.latency, seqs.clone());
+            Some(std::thread::spawn(move || stream_crops(&socket, &seqs, &starts, latency, t0)))
+        }
+        _ => None,
+    };
     let never = AtomicBool::new(false);
     stream(&tracker, &balls, &starts, cfg.tracker.latency, t0, &never)?;
+    if let Some(c) = camera {
+        c.join().map_err(|_| std::io::Error::other("crop stream panicked"))??;
+    }
     // Let the last stroke finish and the bat come home.
     let last_end = starts.last().copied().unwrap_or(0.0) + ends.last().copied().unwrap_or(0.0);
     let until = capture_time(t0, last_end, 0.6);
@@ -261,7 +291,59 @@ fn judge(
         plans_late: summary.telemetry.plans_late,
         late_by_max_ms: summary.telemetry.late_by_max_ms,
         plans_rejected: summary.telemetry.plans_rejected,
+        logo: summary.logo,
+        logo_spins_fused: summary.telemetry.logo_spins_fused,
+        logo_spins_gated: summary.telemetry.logo_spins_gated,
         warnings: summary.warnings.iter().map(|w| w.to_string()).collect(),
         per_ball,
     }
+}
+
+/// Renders each ball's pass through the ceiling camera's strip (orange
+/// ball, the frames before the bounce).
+fn render_crops(cal: &Calibration, cam: &CameraCalib, seed: u64, balls: &[SimBall]) -> Vec<Sequence> {
+    use rayon::prelude::*;
+    let prop = cal.propagator();
+    let scene = Scene::new(cam.clone(), BallColour::Orange);
+    let opts = SequenceOptions { frames: crate::logo::stream::SEQUENCE_LEN };
+    balls.par_iter().map(|b| render_sequence(&scene, &b.truth, &prop, seed, b.index, &opts)).collect()
+}
+
+/// Sends every rendered crop as a TTI1 datagram at capture + `latency`.
+fn stream_crops(
+    socket: &UdpSocket,
+    seqs: &[Sequence],
+    starts: &[f64],
+    latency: f64,
+    t0: Instant,
+) -> std::io::Result<u64> {
+    let mut items: Vec<(Instant, &crate::render::Frame)> = seqs
+        .iter()
+        .zip(starts)
+        .flat_map(|(s, &start)| s.frames.iter().map(move |f| (capture_time(t0, start, f.label.t), f)))
+        .collect();
+    items.sort_by_key(|(t, _)| t.0);
+    let latency = Duration::from_nanos((latency.max(0.0) * 1e9) as u64);
+    let mut buf = vec![0u8; CROP_MAX_LEN];
+    let mut sent = 0;
+    for (seq, (capture, f)) in items.into_iter().enumerate() {
+        runtime::sleep_until(capture + latency, Duration::from_micros(0));
+        let m = f.label.measured;
+        let n = Crop {
+            seq: seq as u32,
+            capture,
+            u: m.u as f32,
+            v: m.v as f32,
+            radius: m.radius as f32,
+            width: f.crop.width as u16,
+            height: f.crop.height as u16,
+            pixels: &f.crop.rgb,
+        }
+        .emit(&mut buf)
+        .map_err(|e| std::io::Error::other(e.to_string()))?;
+        if socket.send(&buf[..n]).is_ok() {
+            sent += 1;
+        }
+    }
+    Ok(sent)
 }

@@ -32,6 +32,16 @@ pub struct DemoArgs {
     /// later than a cycle are then counted in `answers_after_cycle`.
     #[arg(long, hide = true)]
     pub answer_deadline_ms: Option<u64>,
+    /// Simulate the ceiling camera too and run the logo thread: `cnn` or
+    /// `background`; its spins are fused into the estimator's.
+    #[arg(long, value_name = "METHOD")]
+    pub logo: Option<crate::config::LogoMethodConfig>,
+    /// --logo cnn: the ONNX model (default: models/logo-compact.onnx).
+    #[arg(long, value_name = "FILE")]
+    pub model: Option<std::path::PathBuf>,
+    /// --logo cnn: auto, tract or onnxruntime.
+    #[arg(long, value_enum, default_value = "auto")]
+    pub backend: crate::logo::cnn::Backend,
 }
 
 pub fn run(a: DemoArgs) -> anyhow::Result<()> {
@@ -48,7 +58,25 @@ pub fn run(a: DemoArgs) -> anyhow::Result<()> {
         return Err(BadInput(format!("--gap {} must be positive", a.gap)).into());
     }
     let cal = Calibration::default_cell();
+    let mut runtime = crate::runtime::daemon::RuntimeConfig::loopback();
+    if let Some(method) = a.logo {
+        runtime.logo = Some(crate::runtime::daemon::LogoRuntime {
+            bind: "127.0.0.1:0".parse().expect("literal"),
+            source: Some([127, 0, 0, 1].into()),
+            method: match method {
+                crate::config::LogoMethodConfig::Cnn => crate::runtime::daemon::LogoMethodChoice::Cnn {
+                    model: a.model.clone().unwrap_or_else(crate::logo::cnn::default_model),
+                    backend: a.backend.clone(),
+                },
+                crate::config::LogoMethodConfig::Background => crate::runtime::daemon::LogoMethodChoice::Background,
+            },
+            camera: crate::calib::camera::CameraCalib::default_camera(),
+            camera_latency: crate::time::Duration(0),
+            thread: Default::default(),
+        });
+    }
     let cfg = DemoConfig {
+        runtime,
         balls: a.balls,
         seed: a.seed,
         tracker: TrackerModel { noise_sigma: a.noise_mm * 1e-3, dropout: a.dropout, ..TrackerModel::default() },
@@ -150,6 +178,13 @@ pub fn table(r: &DemoReport) -> String {
         "plans taken late: {} (worst {:.1} ms), refused: {}",
         r.plans_late, r.late_by_max_ms, r.plans_rejected
     );
+    if let Some(c) = &r.logo {
+        let _ = writeln!(
+            out,
+            "logo thread: {} crops, {} sequences, {} fitted; spins fused into the track {}, refused by the gate {}",
+            c.crops, c.sequences, c.fitted, r.logo_spins_fused, r.logo_spins_gated
+        );
+    }
     for w in &r.warnings {
         let _ = writeln!(out, "warning: {w}");
     }

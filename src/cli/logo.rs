@@ -1,5 +1,7 @@
-//! `topspin logo FOLDER [--json]`: spin from a sequence of ball crops, and
-//! `topspin logo --eval`: the method's accuracy on rendered sequences.
+//! `topspin logo FOLDER [--json]`: spin from a sequence of ball crops;
+//! `topspin logo --eval`: the background method's accuracy on rendered
+//! sequences; `--cnn-eval DIR` and `--compare`: the CNN's metrics and the
+//! spin sources side by side (see [`super::logo_cnn`]).
 //!
 //! The folder holds the crops as PNG (RGB8 or RGBA8) and a `frames.csv`
 //! with at least the columns `file,t,u,v,radius` (extra columns ignored):
@@ -13,7 +15,7 @@ use std::path::{Path, PathBuf};
 
 use serde_json::json;
 
-use super::BadInput;
+use super::{BadInput, logo_cnn};
 use crate::calib::Calibration;
 use crate::calib::camera::CameraCalib;
 use crate::logo::ball::Circle;
@@ -27,14 +29,31 @@ use crate::sim::Setting;
 #[derive(Debug, clap::Args)]
 pub struct LogoArgs {
     /// Folder with frames.csv (file,t,u,v,radius) and the PNG crops.
-    #[arg(required_unless_present = "eval")]
+    #[arg(required_unless_present_any = ["eval", "compare", "cnn_eval"])]
     pub folder: Option<PathBuf>,
     /// Print one JSON object.
     #[arg(long)]
     pub json: bool,
     /// Evaluate on rendered sequences instead (no FOLDER).
-    #[arg(long, conflicts_with = "folder")]
+    #[arg(long, conflicts_with_all = ["folder", "compare", "cnn_eval"])]
     pub eval: bool,
+    /// Compare the trajectory's, the logo's (background, CNN) and the fused
+    /// spins on the same simulated flights (no FOLDER).
+    #[arg(long, conflicts_with_all = ["folder", "cnn_eval"])]
+    pub compare: bool,
+    /// The CNN's metrics and speed on a `topspin render --out` folder.
+    #[arg(long, value_name = "DIR", conflicts_with = "folder")]
+    pub cnn_eval: Option<PathBuf>,
+    /// The CNN's ONNX model (default: models/logo-compact.onnx).
+    #[arg(long, value_name = "FILE")]
+    pub model: Option<PathBuf>,
+    /// Inference backend: auto (ONNX Runtime when ORT_DYLIB_PATH names its
+    /// library, else tract), tract or onnxruntime.
+    #[arg(long, value_enum, default_value = "auto")]
+    pub backend: crate::logo::cnn::Backend,
+    /// --compare: leave the CNN out.
+    #[arg(long)]
+    pub no_cnn: bool,
     /// --eval: filmed balls per setting and colour.
     #[arg(long, default_value_t = 6)]
     pub balls: usize,
@@ -51,7 +70,8 @@ pub struct LogoArgs {
     #[arg(long, default_value_t = 20)]
     pub frames: usize,
     /// Logo centre: centroid (paper, uncorrected), segment (paper with the
-    /// circular-segment correction) or weighted (area-weighted + segment).
+    /// circular-segment correction), weighted (area-weighted + segment) or
+    /// cnn (the network of --model).
     #[arg(long, default_value = "segment")]
     pub method: String,
     /// Gaps of two or more unseen frames: paper (the large angle) or
@@ -71,7 +91,7 @@ fn parse_method(s: &str) -> Result<LogoMethod, BadInput> {
     LogoMethod::ALL
         .into_iter()
         .find(|m| m.name() == s)
-        .ok_or_else(|| BadInput(format!("--method `{s}`: expected centroid, segment or weighted")))
+        .ok_or_else(|| BadInput(format!("--method `{s}`: expected centroid, segment, weighted or cnn")))
 }
 
 fn parse_gap_rule(s: &str) -> Result<GapRule, BadInput> {
@@ -84,8 +104,32 @@ fn parse_gap_rule(s: &str) -> Result<GapRule, BadInput> {
 
 pub fn run(a: LogoArgs) -> anyhow::Result<()> {
     let cam = CameraCalib::load(a.calib.as_deref()).map_err(|e| bad(e.to_string()))?;
-    let method = parse_method(&a.method)?;
     let fit_cfg = RotationFitConfig { gap_rule: parse_gap_rule(&a.gap_rule)?, ..RotationFitConfig::default() };
+    let model = a.model.clone().unwrap_or_else(crate::logo::cnn::default_model);
+    if let Some(dir) = &a.cnn_eval {
+        let mut net = logo_cnn::load(&model, &a.backend)?;
+        return logo_cnn::run_cnn_eval(dir, &mut net, a.json);
+    }
+    if a.compare {
+        if a.balls == 0 || a.frames < eval::MIN_FRAMES {
+            return Err(bad(format!("--balls must be ≥ 1 and --frames ≥ {}", eval::MIN_FRAMES)));
+        }
+        let colour = match parse_colours(&a.colour)?.as_slice() {
+            [c] => *c,
+            _ => BallColour::Orange,
+        };
+        let opts = logo_cnn::compare_options(a.seed, a.balls, parse_settings(&a.setting)?, colour, a.frames);
+        let mut net = if a.no_cnn { None } else { Some(logo_cnn::load(&model, &a.backend)?) };
+        return logo_cnn::run_compare(a.calib.as_deref(), &cam, &opts, net.as_mut(), a.json);
+    }
+    if a.method == "cnn" {
+        let Some(folder) = a.folder.as_deref() else {
+            return Err(bad("FOLDER is required with --method cnn"));
+        };
+        let mut net = logo_cnn::load(&model, &a.backend)?;
+        return logo_cnn::run_folder(folder, &read_folder(folder)?, &cam, &fit_cfg, &mut net, a.json);
+    }
+    let method = parse_method(&a.method)?;
     if a.eval {
         return run_eval(&a, &cam, fit_cfg);
     }
@@ -141,14 +185,15 @@ pub fn run(a: LogoArgs) -> anyhow::Result<()> {
 }
 
 /// One decoded crop of a folder.
-struct FolderFrame {
-    t: f64,
-    circle: Circle,
+#[derive(Debug)]
+pub struct FolderFrame {
+    pub t: f64,
+    pub circle: Circle,
     x0: i64,
     y0: i64,
     width: usize,
     height: usize,
-    rgb: Vec<u8>,
+    pub rgb: Vec<u8>,
 }
 
 fn read_folder(folder: &Path) -> Result<Vec<FolderFrame>, BadInput> {

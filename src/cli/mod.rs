@@ -10,6 +10,7 @@ pub mod eval;
 pub mod eval_real;
 pub mod fit;
 pub mod logo;
+pub mod logo_cnn;
 pub mod mock_krc;
 pub mod render;
 pub mod replay;

@@ -10,11 +10,13 @@
 //!
 //! `file,ball,setting,colour,frame,t,u,v,radius,true_u,true_v,true_radius,
 //! logo_visible,logo_facing,logo_x,logo_y,logo_z,q_w,q_x,q_y,q_z,x,y,z,
-//! spin_x,spin_y,spin_z` — t in s after launch; u, v, radius the circle the
+//! spin_x,spin_y,spin_z,view_x,view_y,view_z` — t in s after launch; u, v, radius the circle the
 //! camera side measured (full-sensor px), `true_*` the projected truth;
 //! the logo's centre on the unit sphere and the orientation (body → camera
 //! quaternion; the logo is the body's +z) in the camera frame; the ball
-//! centre and the spin in the table frame.
+//! centre and the spin in the table frame; `view_*` the logo's centre in
+//! the view frame of the measured circle ([`crate::logo::view`]: z towards
+//! the camera, x along image u, y image up), the CNN's training target.
 
 use std::fmt::Write as _;
 use std::io::Write as _;
@@ -28,9 +30,10 @@ use super::BadInput;
 use super::logo::parse_colours;
 use crate::calib::Calibration;
 use crate::calib::camera::CameraCalib;
+use crate::logo::BallView;
 use crate::logo::eval::MIN_FRAMES;
-use crate::physics::rad_to_rps;
-use crate::render::{Frame, Scene, Sequence, SequenceOptions, render_sequence};
+use crate::physics::{Vec3, rad_to_rps};
+use crate::render::{Conditions, Frame, Scene, Sequence, SequenceOptions, render_sequence};
 use crate::sim::{Setting, TrackerModel, simulate_ball};
 use crate::time::Instant;
 use crate::wire::crop::{CROP_MAX_LEN, Crop};
@@ -71,6 +74,26 @@ pub struct RenderArgs {
     /// Calibration folder (camera.toml and the others).
     #[arg(long, value_name = "DIR")]
     pub calib: Option<PathBuf>,
+    /// Light and sensor noise: `lab` (the default scene) or `other-lab`
+    /// (light from the other side, dimmer, twice the noise: held-out tests).
+    #[arg(long, value_enum, default_value = "lab")]
+    pub conditions: ConditionsArg,
+}
+
+/// `--conditions`.
+#[derive(Copy, Clone, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum ConditionsArg {
+    Lab,
+    OtherLab,
+}
+
+impl ConditionsArg {
+    pub fn conditions(self) -> Conditions {
+        match self {
+            ConditionsArg::Lab => Conditions::default(),
+            ConditionsArg::OtherLab => Conditions::other_lab(),
+        }
+    }
 }
 
 fn bad(msg: impl Into<String>) -> anyhow::Error {
@@ -95,7 +118,7 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
     let prop = cal.propagator();
     let mut sequences = Vec::new();
     for colour in colours {
-        let scene = Scene::new(cam.clone(), colour);
+        let scene = Scene::with_conditions(cam.clone(), colour, a.conditions.conditions());
         let mut got = 0;
         let mut k = 0;
         while got < a.balls && k < 20 * a.balls + 20 {
@@ -140,16 +163,19 @@ fn folder_name(s: &Sequence) -> String {
 }
 
 const HEADER: &str = "file,ball,setting,colour,frame,t,u,v,radius,true_u,true_v,true_radius,logo_visible,logo_facing,\
-logo_x,logo_y,logo_z,q_w,q_x,q_y,q_z,x,y,z,spin_x,spin_y,spin_z";
+logo_x,logo_y,logo_z,q_w,q_x,q_y,q_z,x,y,z,spin_x,spin_y,spin_z,view_x,view_y,view_z";
 
-fn label_line(file: &str, s: &Sequence, f: &Frame) -> String {
+fn label_line(cam: &CameraCalib, file: &str, s: &Sequence, f: &Frame) -> String {
     let l = &f.label;
+    let view = BallView::new(cam, l.measured.u, l.measured.v, l.measured.radius)
+        .map(|v| v.to_view(&l.logo_camera))
+        .unwrap_or(Vec3::new(f64::NAN, f64::NAN, f64::NAN));
     let q = l.camera_from_body.quaternion();
     let w = s.spin_table;
     let mut line = String::new();
     let _ = writeln!(
         line,
-        "{file},{},{},{},{},{:.9},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.4},{:.4},{:.4}",
+        "{file},{},{},{},{},{:.9},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.4},{:.4},{:.4},{:.6},{:.6},{:.6}",
         s.ball,
         s.setting,
         s.colour.name(),
@@ -175,7 +201,10 @@ fn label_line(file: &str, s: &Sequence, f: &Frame) -> String {
         l.pos.z,
         w.x,
         w.y,
-        w.z
+        w.z,
+        view.x,
+        view.y,
+        view.z
     );
     line
 }
@@ -206,8 +235,8 @@ fn write_dataset(dir: &Path, seed: u64, cam: &CameraCalib, sequences: &[Sequence
         for (i, f) in s.frames.iter().enumerate() {
             let file = format!("frame-{i:02}.png");
             write_png(&sub.join(&file), f.crop.width, f.crop.height, &f.crop.rgb)?;
-            frames.push_str(&label_line(&file, s, f));
-            labels.push_str(&label_line(&format!("{name}/{file}"), s, f));
+            frames.push_str(&label_line(cam, &file, s, f));
+            labels.push_str(&label_line(cam, &format!("{name}/{file}"), s, f));
         }
         let path = sub.join("frames.csv");
         std::fs::write(&path, frames).map_err(|e| io(&path, e))?;

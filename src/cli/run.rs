@@ -14,11 +14,12 @@ use clap::Args;
 
 use super::BadInput;
 use crate::calib::Calibration;
-use crate::config::{DaemonConfig, RsiWait};
+use crate::calib::camera::CameraCalib;
+use crate::config::{DaemonConfig, LogoMethodConfig, RsiWait};
 use crate::record::sink::RecordingSink;
 use crate::record::{Recorder, calib_files};
 use crate::rsi::server::WaitStrategy;
-use crate::runtime::daemon::{Daemon, RuntimeConfig, ThreadSpec};
+use crate::runtime::daemon::{Daemon, LogoMethodChoice, LogoRuntime, RuntimeConfig, ThreadSpec};
 use crate::runtime::telemetry::TelemetrySink;
 use crate::systemd::Notifier;
 use crate::time::Duration;
@@ -33,11 +34,12 @@ pub struct RunArgs {
     pub print_config: bool,
 }
 
-/// The threads' settings from the daemon configuration.
-pub fn runtime_config(c: &DaemonConfig) -> RuntimeConfig {
+/// The threads' settings from the daemon configuration (and, for the logo
+/// thread, the camera's calibration).
+pub fn runtime_config(c: &DaemonConfig) -> Result<RuntimeConfig, BadInput> {
     let t = &c.threads;
     let spec = |core: crate::config::Core, priority: u8| ThreadSpec { core: core.0, priority: Some(priority as i32) };
-    RuntimeConfig {
+    Ok(RuntimeConfig {
         tracker_bind: c.network.tracker_bind,
         tracker_source: Some(c.network.tracker_source),
         rsi_bind: c.network.rsi_bind,
@@ -57,7 +59,26 @@ pub fn runtime_config(c: &DaemonConfig) -> RuntimeConfig {
         sentype: c.rsi.sentype.clone(),
         log_interval_s: c.telemetry.log_interval_s,
         record_rsi: c.recording.enabled,
+        logo: logo_runtime(c)?,
+    })
+}
+
+fn logo_runtime(c: &DaemonConfig) -> Result<Option<LogoRuntime>, BadInput> {
+    let l = &c.logo;
+    if !l.enabled {
+        return Ok(None);
     }
+    Ok(Some(LogoRuntime {
+        bind: l.crops_bind,
+        source: Some(l.crops_source),
+        method: match l.method {
+            LogoMethodConfig::Cnn => LogoMethodChoice::Cnn { model: c.logo_model(), backend: l.backend.clone() },
+            LogoMethodConfig::Background => LogoMethodChoice::Background,
+        },
+        camera: CameraCalib::load(c.calib.dir()).map_err(|e| BadInput(e.to_string()))?,
+        camera_latency: Duration::from_nanos(c.fixed_latency_ns()),
+        thread: ThreadSpec { core: l.core.0, priority: None },
+    }))
 }
 
 fn init_logging(level: &str) {
@@ -73,6 +94,7 @@ pub fn run(a: RunArgs) -> anyhow::Result<()> {
         return Ok(());
     }
     let cal = Calibration::load(cfg.calib.dir()).map_err(|e| BadInput(e.to_string()))?;
+    let rt = runtime_config(&cfg)?;
     init_logging(&cfg.telemetry.log_level);
     let sink: Option<Box<dyn TelemetrySink>> = if cfg.recording.enabled {
         let dir = &cfg.recording.dir;
@@ -86,8 +108,7 @@ pub fn run(a: RunArgs) -> anyhow::Result<()> {
     } else {
         None
     };
-    let daemon =
-        Daemon::start(&runtime_config(&cfg), &cal, sink).map_err(|e| anyhow::anyhow!("starting the daemon: {e}"))?;
+    let daemon = Daemon::start(&rt, &cal, sink).map_err(|e| anyhow::anyhow!("starting the daemon: {e}"))?;
     tracing::info!(
         target: "topspin",
         "running: tracker datagrams on {}, RSI on {}",

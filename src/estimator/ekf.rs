@@ -216,6 +216,30 @@ impl Ekf {
         Update::Accepted { d2 }
     }
 
+    /// Offers a direct measurement of the spin (the logo's, rad/s) with
+    /// covariance `r`: the information from the logo fused with what the
+    /// trajectory taught the filter, unless the χ² gate says the two
+    /// disagree (an aliased or mis-detected logo).
+    pub fn update_spin(&mut self, z: &Vec3, r: &Matrix3<f64>) -> Update {
+        let y = z - Vec3::new(self.x[6], self.x[7], self.x[8]);
+        let s = self.p.fixed_view::<3, 3>(6, 6).into_owned() + r;
+        let Some(s_inv) = s.try_inverse() else {
+            return Update::Rejected { d2: f64::INFINITY };
+        };
+        let d2 = (y.transpose() * s_inv * y)[0];
+        if !(d2.is_finite() && d2 <= GATE_CHI2) {
+            return Update::Rejected { d2 };
+        }
+        // K = P Hᵀ S⁻¹ with H = [0 0 I]
+        let k: SMatrix<f64, 9, 3> = self.p.fixed_view::<9, 3>(0, 6).into_owned() * s_inv;
+        self.x += k * y;
+        let mut ikh = M9::identity();
+        ikh.fixed_view_mut::<9, 3>(0, 6).sub_assign(&k);
+        self.p = ikh * self.p * ikh.transpose() + k * r * k.transpose();
+        self.symmetrise();
+        Update::Accepted { d2 }
+    }
+
     fn symmetrise(&mut self) {
         self.p = (self.p + self.p.transpose()) * 0.5;
     }

@@ -133,6 +133,25 @@ pub enum EstimatorEvent {
         t: f64,
         reason: Withheld,
     },
+    /// A spin from the logo thread, fused into the track (`accepted`) or
+    /// refused by the gate; `d2` its squared Mahalanobis distance.
+    LogoSpin {
+        trajectory: u32,
+        t: f64,
+        accepted: bool,
+        d2: f64,
+    },
+}
+
+/// A spin measured from the ball's logo (the logo thread's result).
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub struct LogoSpin {
+    /// Capture time of the last crop it was fitted over.
+    pub last_crop: Instant,
+    /// rad/s, table frame.
+    pub spin: Vec3,
+    /// Its covariance, (rad/s)².
+    pub cov: nalgebra::Matrix3<f64>,
 }
 
 /// What one observation produced.
@@ -214,6 +233,24 @@ impl Estimator {
         {
             self.candidate.clear();
         }
+    }
+
+    /// Fuses a logo spin into the current track, if it is of this ball:
+    /// the crops were taken while the track was alive and before its
+    /// bounce (the bounce changes the spin). The filter's spin is a
+    /// constant of the flight model, so the measurement applies now.
+    pub fn observe_logo_spin(&mut self, m: &LogoSpin) -> Option<EstimatorEvent> {
+        let track = self.track.as_mut()?;
+        let t = m.last_crop.as_secs_f64();
+        let started = track.window.first().map(|s| s.t).unwrap_or(track.last_t);
+        if track.spin_before_bounce.is_some() || t < started - self.cfg.silence || t > track.last_t + self.cfg.silence {
+            return None;
+        }
+        let (accepted, d2) = match track.ekf.update_spin(&m.spin, &m.cov) {
+            Update::Accepted { d2 } => (true, d2),
+            Update::Rejected { d2 } => (false, d2),
+        };
+        Some(EstimatorEvent::LogoSpin { trajectory: track.id, t: track.last_t, accepted, d2 })
     }
 
     /// Takes one observation (capture time on our clock, position in the

@@ -14,17 +14,28 @@
 //!   (plane, projected angles, half-revolution rule, regression line);
 //!   shared with any other source of logo positions (a CNN).
 //! - [`pipeline`]: a whole sequence of crops → spin in the table frame.
+//! - [`cnn`]: the paper's second method, a network through `ort` (tract or
+//!   ONNX Runtime) from a crop to the logo's visibility and position.
+//! - [`fusion`]: the logo's spin and the trajectory's, combined by their
+//!   covariances behind a χ² gate.
+//! - [`stream`]: the logo thread's work: TTI1 crops → sequences → spins.
+//! - [`compare`]: trajectory, background, CNN and fused spins on the same
+//!   simulated flights.
 //! - [`eval`]: accuracy on rendered sequences against their ground truth.
 //!
 //! What this module must not do: read clocks or sockets (times come with
 //! the crops), or allocate per crop on the hot path ([`detect::detect`]).
 
 pub mod ball;
+pub mod cnn;
+pub mod compare;
 pub mod detect;
 pub mod eval;
+pub mod fusion;
 pub mod pipeline;
 pub mod rotation;
 pub mod segment;
+pub mod stream;
 pub mod view;
 
 pub use detect::{BallReference, CropImage, DetectorConfig, LogoMeasurement, detect};

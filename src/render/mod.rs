@@ -88,15 +88,35 @@ impl std::str::FromStr for BallColour {
 
 /// Linear albedo of the printed logo.
 const LOGO_ALBEDO: [f64; 3] = [0.018, 0.018, 0.026];
-/// Ambient and key-light shares.
-const AMBIENT: f64 = 0.22;
-const KEY: f64 = 0.78;
-/// Key light direction in the table frame (from the ceiling, a little
-/// towards +x and +y).
-const LIGHT_T: [f64; 3] = [0.25, 0.15, 1.0];
-/// Sensor read noise and shot-noise gain, in 8-bit units.
-const READ_NOISE: f64 = 1.5;
-const SHOT_GAIN: f64 = 0.02;
+/// The light and the sensor's noise: what a dataset varies to show that a
+/// network trained under one setting generalises to another.
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub struct Conditions {
+    /// Key light direction in the table frame (towards the light).
+    pub light: Vec3,
+    /// Ambient and key-light shares of the radiance.
+    pub ambient: f64,
+    pub key: f64,
+    /// Sensor read noise (8-bit units) and shot-noise gain.
+    pub read_noise: f64,
+    pub shot_gain: f64,
+}
+
+impl Default for Conditions {
+    /// The lab's ceiling light, a little towards +x and +y, and the
+    /// Grasshopper3's noise at the paper's 0.25 ms exposure.
+    fn default() -> Self {
+        Conditions { light: Vec3::new(0.25, 0.15, 1.0), ambient: 0.22, key: 0.78, read_noise: 1.5, shot_gain: 0.02 }
+    }
+}
+
+impl Conditions {
+    /// Another lab: a light from the other side and lower, dimmer key,
+    /// more ambient, twice the sensor noise (the held-out test set).
+    pub fn other_lab() -> Self {
+        Conditions { light: Vec3::new(-0.45, -0.30, 1.0), ambient: 0.30, key: 0.60, read_noise: 3.0, shot_gain: 0.04 }
+    }
+}
 
 /// The scene: camera, ball, light.
 #[derive(Clone, Debug)]
@@ -106,6 +126,7 @@ pub struct Scene {
     /// Sensor noise on (off gives the noise-free image, e.g. the
     /// background model).
     pub noise: bool,
+    conditions: Conditions,
     light_c: Vec3,
 }
 
@@ -184,8 +205,12 @@ pub struct Sequence {
 
 impl Scene {
     pub fn new(cam: CameraCalib, colour: BallColour) -> Self {
-        let light_c = cam.table_from_camera.inverse_transform_vector(&Vec3::from(LIGHT_T).normalize());
-        Scene { cam, colour, noise: true, light_c }
+        Self::with_conditions(cam, colour, Conditions::default())
+    }
+
+    pub fn with_conditions(cam: CameraCalib, colour: BallColour, conditions: Conditions) -> Self {
+        let light_c = cam.table_from_camera.inverse_transform_vector(&conditions.light.normalize());
+        Scene { cam, colour, noise: true, conditions, light_c }
     }
 
     /// Texture of the table surface at (x, y) (table frame), linear RGB.
@@ -216,7 +241,7 @@ impl Scene {
                 let inside = (n.dot(logo) - cos_rho) / sin_rho;
                 let cover = (0.5 + inside / LOGO_EDGE).clamp(0.0, 1.0);
                 let a = self.colour.albedo();
-                let shade = AMBIENT + KEY * n.dot(&self.light_c).max(0.0);
+                let shade = self.conditions.ambient + self.conditions.key * n.dot(&self.light_c).max(0.0);
                 return std::array::from_fn(|c| (a[c] * (1.0 - cover) + LOGO_ALBEDO[c] * cover) * shade);
             }
         }
@@ -227,7 +252,7 @@ impl Scene {
             return [0.05, 0.05, 0.05];
         }
         let s = -o.z / dt.z;
-        let shade = AMBIENT + KEY * Vec3::from(LIGHT_T).normalize().z;
+        let shade = self.conditions.ambient + self.conditions.key * self.conditions.light.normalize().z;
         self.table(o.x + s * dt.x, o.y + s * dt.y).map(|c| c * shade)
     }
 
@@ -285,7 +310,8 @@ impl Scene {
                     let lin = (acc[c] / SUBFRAMES as f64).clamp(0.0, 1.0);
                     let mut val = 255.0 * lin.powf(1.0 / 2.2);
                     if self.noise {
-                        let sigma = (READ_NOISE * READ_NOISE + SHOT_GAIN * val).sqrt();
+                        let c = &self.conditions;
+                        let sigma = (c.read_noise * c.read_noise + c.shot_gain * val).sqrt();
                         let z: f64 = StandardNormal.sample(rng);
                         val += sigma * z;
                     }

@@ -1,5 +1,6 @@
 //! The daemon's threads (DESIGN §4): ingest → estimator → RSI loop, and
-//! telemetry. Each hot thread is a thin loop around a sans-IO core
+//! telemetry; optionally the logo thread (TTI1 crops → logo spin → the
+//! estimator, through its own ring; it is not a hot thread). Each hot thread is a thin loop around a sans-IO core
 //! (`Ingest`, `Estimator`, `RsiSession`); they talk through SPSC rings of
 //! named capacity (rtrb) and a wait-free latest-value plan slot, and report
 //! through their own telemetry ring. Threads are pinned and given SCHED_FIFO
@@ -22,14 +23,24 @@ use super::telemetry::{
     TelemetryInputs, TelemetrySink, TelemetrySummary, TelemetryTx,
 };
 use crate::calib::Calibration;
-use crate::estimator::{Estimator, EstimatorConfig};
+use crate::calib::camera::CameraCalib;
+use crate::estimator::{Estimator, EstimatorConfig, LogoSpin};
+use crate::ingest::clock::ClockMap;
 use crate::ingest::{Accepted, Ingest, IngestCounters};
+use crate::logo::cnn::{Backend, LogoCnn};
+use crate::logo::pipeline::LogoMethod;
+use crate::logo::stream::{LogoCounters, LogoStream, Method};
 use crate::motion::generator::Phase;
 use crate::rsi::server::{PlanReader, RsiServer, RsiSink, WaitStrategy, plan_slot};
 use crate::rsi::session::{RsiSession, SessionConfig, SessionEvent, SessionStats};
 use crate::runtime;
 use crate::time::{Duration, Instant};
+use crate::wire::crop::{CROP_MAX_LEN, Crop};
 
+/// Capacity of the logo → estimator ring, spins (one per ball).
+pub const LOGO_RING: usize = 8;
+/// Receive timeout of the logo socket: ends quiet sequences, looks at the stop flag.
+pub const LOGO_POLL: std::time::Duration = std::time::Duration::from_millis(5);
 /// Capacity of the ingest → estimator ring, observations.
 pub const OBSERVATION_RING: usize = 1024;
 /// Largest tracker datagram read; longer ones are truncated (and malformed).
@@ -78,6 +89,28 @@ pub struct RuntimeConfig {
     pub log_interval_s: f64,
     /// Push the RSI bytes to telemetry (for the recording).
     pub record_rsi: bool,
+    /// The logo thread, if on.
+    pub logo: Option<LogoRuntime>,
+}
+
+/// The logo thread's settings.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LogoRuntime {
+    pub bind: SocketAddr,
+    /// Only crops from this address are accepted (`None`: any).
+    pub source: Option<IpAddr>,
+    pub method: LogoMethodChoice,
+    pub camera: CameraCalib,
+    /// Capture → datagram latency of the camera side.
+    pub camera_latency: Duration,
+    pub thread: ThreadSpec,
+}
+
+/// How the logo thread finds the logo.
+#[derive(Clone, Debug, PartialEq)]
+pub enum LogoMethodChoice {
+    Cnn { model: std::path::PathBuf, backend: Backend },
+    Background,
 }
 
 impl RuntimeConfig {
@@ -103,6 +136,7 @@ impl RuntimeConfig {
             sentype: "ImFree".to_owned(),
             log_interval_s: 10.0,
             record_rsi: false,
+            logo: None,
         }
     }
 }
@@ -126,6 +160,8 @@ pub struct DaemonSummary {
     pub warnings: Vec<RtWarning>,
     /// The RSI loop ended with the bat home (or no robot was there).
     pub ended_home: bool,
+    /// The logo thread's counters, if it ran.
+    pub logo: Option<LogoCounters>,
 }
 
 /// The running daemon.
@@ -133,6 +169,8 @@ pub struct DaemonSummary {
 pub struct Daemon {
     pub tracker_addr: SocketAddr,
     pub rsi_addr: SocketAddr,
+    /// Where the logo thread receives crops, if it runs.
+    pub crops_addr: Option<SocketAddr>,
     stop: Arc<AtomicBool>,
     rsi_stop: Arc<AtomicBool>,
     telemetry_stop: Arc<AtomicBool>,
@@ -141,6 +179,7 @@ pub struct Daemon {
     estimator: JoinHandle<()>,
     rsi: JoinHandle<io::Result<SessionStats>>,
     telemetry: JoinHandle<TelemetrySummary>,
+    logo: Option<JoinHandle<LogoCounters>>,
     warnings: Arc<Mutex<Vec<RtWarning>>>,
 }
 
@@ -204,14 +243,44 @@ impl Daemon {
         };
         let (obs_tx, obs_rx) = rtrb::RingBuffer::<ObsItem>::new(OBSERVATION_RING);
         let (plan_tx, plan_rx) = plan_slot();
+        let (logo_tx, logo_rx) = rtrb::RingBuffer::<LogoSpin>::new(LOGO_RING);
+        // The logo thread's socket and model first: a model that does not
+        // load stops the start with its reason.
+        let logo_parts = match &cfg.logo {
+            Some(l) => {
+                let socket = UdpSocket::bind(l.bind)?;
+                socket.set_read_timeout(Some(LOGO_POLL))?;
+                let method = match &l.method {
+                    LogoMethodChoice::Cnn { model, backend } => Method::Cnn(Box::new(
+                        LogoCnn::load(model, backend)
+                            .map_err(|e| io::Error::new(io::ErrorKind::InvalidInput, e.to_string()))?,
+                    )),
+                    LogoMethodChoice::Background => Method::Background(LogoMethod::Segment),
+                };
+                Some((socket, LogoStream::new(l.camera.clone(), method), l.source, l.thread))
+            }
+            None => None,
+        };
+        let crops_addr = logo_parts.as_ref().map(|p| p.0.local_addr()).transpose()?;
 
         let estimator = {
             let est = Estimator::new(cal, EstimatorConfig::default().with_noise(cfg.tracker_noise));
             let stop = stop.clone();
             let busy = cfg.estimator_busy_poll;
             spawn("estimator", cfg.estimator, cfg.realtime, &warnings, move || {
-                estimator_loop(est, obs_rx, plan_tx, tx_est, &stop, busy)
+                estimator_loop(est, obs_rx, logo_rx, plan_tx, tx_est, &stop, busy)
             })?
+        };
+        let logo = match logo_parts {
+            Some((socket, stream, source, spec)) => {
+                let stop = stop.clone();
+                let latency = cfg.logo.as_ref().map_or(Duration(0), |l| l.camera_latency);
+                let est_thread = estimator.thread().clone();
+                Some(spawn("logo", spec, false, &warnings, move || {
+                    logo_loop(stream, socket, source, logo_tx, latency, &stop, &est_thread)
+                })?)
+            }
+            None => None,
         };
         let ingest = {
             let ing = Ingest::new(cfg.tracker_source, cfg.tracker_fixed_latency.0);
@@ -245,6 +314,8 @@ impl Daemon {
         Ok(Daemon {
             tracker_addr,
             rsi_addr,
+            crops_addr,
+            logo,
             stop,
             rsi_stop,
             telemetry_stop,
@@ -298,11 +369,15 @@ impl Daemon {
         self.rsi_stop.store(true, Ordering::Release);
         let ingest = self.ingest.join().map_err(|_| io::Error::other("ingest thread panicked"))?;
         self.estimator.join().map_err(|_| io::Error::other("estimator thread panicked"))?;
+        let logo = match self.logo {
+            Some(h) => Some(h.join().map_err(|_| io::Error::other("logo thread panicked"))?),
+            None => None,
+        };
         let session = self.rsi.join().map_err(|_| io::Error::other("rsi thread panicked"))??;
         self.telemetry_stop.store(true, Ordering::Release);
         let telemetry = self.telemetry.join().map_err(|_| io::Error::other("telemetry thread panicked"))?;
         let warnings = self.warnings.lock().unwrap_or_else(|e| e.into_inner()).clone();
-        Ok(DaemonSummary { telemetry, ingest, session, warnings, ended_home })
+        Ok(DaemonSummary { telemetry, ingest, session, warnings, ended_home, logo })
     }
 }
 
@@ -354,9 +429,57 @@ fn ingest_loop(
     c
 }
 
+/// The logo thread: crops from the configured source → [`LogoStream`] →
+/// spins to the estimator (a full ring drops the spin: it is one ball's).
+fn logo_loop(
+    mut stream: LogoStream,
+    socket: UdpSocket,
+    source: Option<IpAddr>,
+    mut spins: rtrb::Producer<LogoSpin>,
+    latency: Duration,
+    stop: &AtomicBool,
+    estimator: &std::thread::Thread,
+) -> LogoCounters {
+    let mut buf = vec![0u8; CROP_MAX_LEN + 1];
+    let mut clock = ClockMap::new(latency.0);
+    let mut foreign = 0u64;
+    let mut malformed = 0u64;
+    let mut ignore = |_| {};
+    while !stop.load(Ordering::Acquire) {
+        let spin = match socket.recv_from(&mut buf) {
+            Ok((n, from)) => {
+                if source.is_some_and(|ip| ip != from.ip()) {
+                    foreign += 1;
+                    continue;
+                }
+                match Crop::parse(&buf[..n]) {
+                    Ok(mut c) => {
+                        // The camera's clock mapped onto ours, as the tracker's is.
+                        c.capture = clock.map(c.capture.0, runtime::now());
+                        stream.crop(&c, &mut ignore)
+                    }
+                    Err(_) => {
+                        malformed += 1;
+                        continue;
+                    }
+                }
+            }
+            Err(_) => stream.poll(runtime::now(), &mut ignore),
+        };
+        if let Some(s) = spin {
+            let _ = spins.push(s);
+            estimator.unpark();
+        }
+    }
+    let mut c = stream.counters();
+    c.dropped += foreign + malformed;
+    c
+}
+
 fn estimator_loop(
     mut est: Estimator,
     mut obs: rtrb::Consumer<ObsItem>,
+    mut logo: rtrb::Consumer<LogoSpin>,
     mut plans: crate::rsi::server::PlanWriter,
     mut tx: TelemetryTx,
     stop: &AtomicBool,
@@ -367,6 +490,12 @@ fn estimator_loop(
     // plans bit for bit.
     while !stop.load(Ordering::Acquire) {
         let mut any = false;
+        while let Ok(spin) = logo.pop() {
+            any = true;
+            if let Some(e) = est.observe_logo_spin(&spin) {
+                tx.push(Telemetry::Estimator(e));
+            }
+        }
         while let Ok(item) = obs.pop() {
             any = true;
             let out = est.observe(item.accepted.capture, item.accepted.pos);

@@ -164,6 +164,9 @@ pub struct TelemetrySummary {
     pub plans_rejected: u64,
     pub telemetry_dropped: u64,
     pub ingest: IngestCounters,
+    /// Logo spins fused into a track, and refused by its χ² gate.
+    pub logo_spins_fused: u64,
+    pub logo_spins_gated: u64,
 }
 
 impl TelemetrySummary {
@@ -183,6 +186,8 @@ impl TelemetrySummary {
             plans_rejected: 0,
             telemetry_dropped: 0,
             ingest: IngestCounters::default(),
+            logo_spins_fused: 0,
+            logo_spins_gated: 0,
         }
     }
 
@@ -191,6 +196,8 @@ impl TelemetrySummary {
             "datagrams": self.datagrams,
             "plans": self.plans,
             "trajectories": self.trajectories,
+            "logo_spins_fused": self.logo_spins_fused,
+            "logo_spins_gated": self.logo_spins_gated,
             "controller_late": self.controller_late,
             "plans_late": self.plans_late,
             "late_by_max_ms": self.late_by_max_ms,
@@ -298,6 +305,14 @@ fn handle(s: &mut TelemetrySummary, e: &Telemetry, sink: &mut Option<Box<dyn Tel
             }
             EstimatorEvent::Withheld { .. } | EstimatorEvent::Rejected { .. } => {
                 tracing::debug!(target: "topspin::estimator", ?ev)
+            }
+            EstimatorEvent::LogoSpin { accepted, .. } => {
+                if *accepted {
+                    s.logo_spins_fused += 1;
+                } else {
+                    s.logo_spins_gated += 1;
+                }
+                tracing::info!(target: "topspin::estimator", ?ev);
             }
             _ => tracing::info!(target: "topspin::estimator", ?ev),
         },

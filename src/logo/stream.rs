@@ -1,0 +1,296 @@
+//! The logo thread's work, sans-IO: TTI1 crops in (one at a time, capture
+//! times on our clock), one spin per filmed ball out.
+//!
+//! Crops of one ball come at 380 Hz while it crosses the camera's strip; a
+//! gap longer than [`SEQUENCE_GAP`] ends the sequence. A sequence is fitted
+//! when it holds [`SEQUENCE_LEN`] crops (the rest of that pass is ignored)
+//! or when it ends with at least [`MIN_CROPS`]. The crops are copied into
+//! buffers sized at construction; the CNN runs in batches of up to
+//! [`cnn::MAX_BATCH`] as they fill, the background method at the end (its
+//! ball-without-logo reference needs the whole sequence).
+//!
+//! This is not a hot path: the inference backend and the background
+//! method's reference allocate, once per batch or sequence. It runs on its
+//! own thread and talks to the estimator through a ring only.
+
+use crate::calib::camera::CameraCalib;
+use crate::estimator::LogoSpin;
+use crate::logo::ball::Circle;
+use crate::logo::cnn::{self, CnnOutput, LogoCnn};
+use crate::logo::detect::{CropImage, DetectorConfig};
+use crate::logo::fusion::SpinEstimate;
+use crate::logo::pipeline::{CropInput, LogoMethod, process_sequence};
+use crate::logo::rotation::{LogoSample, RotationFitConfig, fit_rotation};
+use crate::logo::view::BallView;
+use crate::render::crop_origin;
+use crate::time::{Duration, Instant};
+use crate::wire::crop::Crop;
+
+/// Crops fitted per ball (≈ 53 ms at 380 Hz).
+pub const SEQUENCE_LEN: usize = 20;
+/// Fewest crops worth a fit.
+pub const MIN_CROPS: usize = 10;
+/// A gap that ends a sequence (≈ 4 frames at 380 Hz).
+pub const SEQUENCE_GAP: Duration = Duration::from_millis(12);
+
+/// How logo positions are found.
+pub enum Method {
+    /// The paper's background subtraction with the given position method.
+    Background(LogoMethod),
+    /// The CNN.
+    Cnn(Box<LogoCnn>),
+}
+
+impl std::fmt::Debug for Method {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Method::Background(m) => write!(f, "Background({})", m.name()),
+            Method::Cnn(c) => write!(f, "Cnn({})", c.backend().name()),
+        }
+    }
+}
+
+/// What happened to a crop or a sequence (for the counters).
+#[derive(Copy, Clone, Debug, PartialEq, Eq)]
+pub enum LogoEvent {
+    /// A sequence was fitted.
+    Fitted { crops: u16, seen: u16 },
+    /// A sequence could not be fitted (too short, logo unseen, no plane).
+    Unfitted { crops: u16 },
+    /// A crop not 60 × 60, or older than the last.
+    CropDropped,
+    /// The network failed on a batch.
+    InferenceFailed,
+}
+
+/// Counters of the logo thread.
+#[derive(Copy, Clone, Debug, Default, PartialEq, Eq, serde::Serialize)]
+pub struct LogoCounters {
+    pub crops: u64,
+    pub dropped: u64,
+    pub sequences: u64,
+    pub fitted: u64,
+    pub inference_failures: u64,
+}
+
+/// The logo thread's state.
+#[derive(Debug)]
+pub struct LogoStream {
+    cam: CameraCalib,
+    method: Method,
+    det: DetectorConfig,
+    fit: RotationFitConfig,
+    /// Pixels of the current sequence, crop after crop.
+    pixels: Vec<u8>,
+    times: Vec<Instant>,
+    circles: Vec<Circle>,
+    /// CNN answers for the crops run so far.
+    outputs: Vec<CnnOutput>,
+    /// The current pass is already fitted: ignore it until a gap.
+    done: bool,
+    last: Option<Instant>,
+    counters: LogoCounters,
+}
+
+const CROP_BYTES: usize = cnn::INPUT_SIZE * cnn::INPUT_SIZE * 3;
+
+impl LogoStream {
+    pub fn new(cam: CameraCalib, method: Method) -> Self {
+        let det = DetectorConfig::for_logo(cam.logo_angular_radius());
+        LogoStream {
+            cam,
+            method,
+            det,
+            fit: RotationFitConfig::default(),
+            pixels: Vec::with_capacity(SEQUENCE_LEN * CROP_BYTES),
+            times: Vec::with_capacity(SEQUENCE_LEN),
+            circles: Vec::with_capacity(SEQUENCE_LEN),
+            outputs: Vec::with_capacity(SEQUENCE_LEN),
+            done: false,
+            last: None,
+            counters: LogoCounters::default(),
+        }
+    }
+
+    pub fn counters(&self) -> LogoCounters {
+        self.counters
+    }
+
+    /// Takes one crop; returns the spin of a sequence it completed.
+    pub fn crop(&mut self, c: &Crop<'_>, events: &mut impl FnMut(LogoEvent)) -> Option<LogoSpin> {
+        self.counters.crops += 1;
+        if c.width as usize != cnn::INPUT_SIZE
+            || c.height as usize != cnn::INPUT_SIZE
+            || self.last.is_some_and(|l| c.capture <= l)
+        {
+            self.counters.dropped += 1;
+            events(LogoEvent::CropDropped);
+            return None;
+        }
+        let mut out = None;
+        if self.last.is_some_and(|l| c.capture - l > SEQUENCE_GAP) {
+            out = self.finish(events);
+        }
+        self.last = Some(c.capture);
+        if self.done {
+            return out;
+        }
+        self.pixels.extend_from_slice(c.pixels);
+        self.times.push(c.capture);
+        self.circles.push(Circle { u: c.u as f64, v: c.v as f64, radius: c.radius as f64 });
+        if let Method::Cnn(_) = self.method
+            && (self.times.len() - self.outputs.len() == cnn::MAX_BATCH || self.times.len() == SEQUENCE_LEN)
+        {
+            self.run_cnn(events);
+        }
+        if self.times.len() == SEQUENCE_LEN {
+            let r = self.fit_sequence(events);
+            self.done = true;
+            return r.or(out);
+        }
+        out
+    }
+
+    /// Ends a sequence that has gone quiet; call now and then.
+    pub fn poll(&mut self, now: Instant, events: &mut impl FnMut(LogoEvent)) -> Option<LogoSpin> {
+        if self.last.is_some_and(|l| now > l && now - l > SEQUENCE_GAP) {
+            let r = self.finish(events);
+            self.last = None;
+            return r;
+        }
+        None
+    }
+
+    fn finish(&mut self, events: &mut impl FnMut(LogoEvent)) -> Option<LogoSpin> {
+        let r = if self.done || self.times.is_empty() { None } else { self.fit_sequence(events) };
+        self.pixels.clear();
+        self.times.clear();
+        self.circles.clear();
+        self.outputs.clear();
+        self.done = false;
+        r
+    }
+
+    fn run_cnn(&mut self, events: &mut impl FnMut(LogoEvent)) {
+        let Method::Cnn(net) = &mut self.method else { return };
+        let from = self.outputs.len();
+        let to = self.times.len();
+        let mut crops: [&[u8]; cnn::MAX_BATCH] = [&[]; cnn::MAX_BATCH];
+        for (k, i) in (from..to).enumerate() {
+            crops[k] = &self.pixels[i * CROP_BYTES..(i + 1) * CROP_BYTES];
+        }
+        let mut answers =
+            [CnnOutput { visibility: 0.0, orientation: nalgebra::UnitQuaternion::identity() }; cnn::MAX_BATCH];
+        if net.infer(&crops[..to - from], &mut answers).is_err() {
+            self.counters.inference_failures += 1;
+            events(LogoEvent::InferenceFailed);
+        }
+        // A failed batch counts as unseen logos.
+        self.outputs.extend_from_slice(&answers[..to - from]);
+    }
+
+    fn fit_sequence(&mut self, events: &mut impl FnMut(LogoEvent)) -> Option<LogoSpin> {
+        let n = self.times.len();
+        self.counters.sequences += 1;
+        if n < MIN_CROPS {
+            events(LogoEvent::Unfitted { crops: n as u16 });
+            return None;
+        }
+        if let Method::Cnn(_) = self.method
+            && self.outputs.len() < n
+        {
+            self.run_cnn(events);
+        }
+        let t0 = self.times[0];
+        let secs = |t: Instant| (t - t0).as_secs_f64();
+        let fit = match &self.method {
+            Method::Cnn(_) => {
+                let samples: Vec<LogoSample> = (0..n)
+                    .map(|i| {
+                        let c = self.circles[i];
+                        let pos = BallView::new(&self.cam, c.u, c.v, c.radius)
+                            .and_then(|v| self.outputs[i].seen(cnn::VISIBLE_THRESHOLD).map(|p| v.to_camera(&p)));
+                        LogoSample::new(secs(self.times[i]), pos)
+                    })
+                    .collect();
+                fit_rotation(&samples, &self.fit).ok().map(|f| f.rotated(&self.cam.table_from_camera))
+            }
+            Method::Background(m) => {
+                let inputs: Option<Vec<CropInput<'_>>> = (0..n)
+                    .map(|i| {
+                        let c = self.circles[i];
+                        let (x0, y0) = crop_origin(c.u, c.v, cnn::INPUT_SIZE as u32, cnn::INPUT_SIZE as u32);
+                        let rgb = &self.pixels[i * CROP_BYTES..(i + 1) * CROP_BYTES];
+                        let crop = CropImage::new(x0, y0, cnn::INPUT_SIZE, cnn::INPUT_SIZE, rgb)?;
+                        Some(CropInput { t: secs(self.times[i]), crop, circle: c })
+                    })
+                    .collect();
+                inputs
+                    .and_then(|inputs| process_sequence(&self.cam, &inputs, &self.det, &self.fit, *m).ok())
+                    .and_then(|r| r.fit.ok())
+            }
+        };
+        let Some(fit) = fit else {
+            events(LogoEvent::Unfitted { crops: n as u16 });
+            return None;
+        };
+        self.counters.fitted += 1;
+        events(LogoEvent::Fitted { crops: n as u16, seen: fit.seen as u16 });
+        let est = SpinEstimate::from_rotation(&fit, secs(self.times[n - 1]));
+        Some(LogoSpin { last_crop: self.times[n - 1], spin: est.spin, cov: est.cov })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::calib::Calibration;
+    use crate::physics::Vec3;
+    use crate::render::{BallColour, Scene, SequenceOptions, render_sequence};
+    use crate::sim::{Setting, TrackerModel, simulate_ball};
+
+    #[test]
+    fn a_ball_passing_the_strip_gives_one_spin_near_the_truth() {
+        let cal = Calibration::default_cell();
+        let prop = cal.propagator();
+        let cam = CameraCalib::default_camera();
+        let scene = Scene::new(cam.clone(), BallColour::Orange);
+        let (truth, seq) = (0..30)
+            .find_map(|k| {
+                let b = simulate_ball(5, k, Setting::ALL[1], &prop, cal.strike.hit_plane_x, &TrackerModel::default())
+                    .ok()?;
+                let seq = render_sequence(&scene, &b.truth, &prop, 5, k, &SequenceOptions { frames: SEQUENCE_LEN });
+                (seq.frames.len() == SEQUENCE_LEN).then_some((Vec3::from(b.truth.spin), seq))
+            })
+            .expect("a filmed ball");
+        let mut stream = LogoStream::new(cam, Method::Background(LogoMethod::Segment));
+        let mut events = Vec::new();
+        let mut spins = Vec::new();
+        let t0 = Instant::from_nanos(1_000_000_000);
+        let at = |t: f64| t0 + Duration::from_nanos((t * 1e9) as u64);
+        for f in &seq.frames {
+            let m = f.label.measured;
+            let c = Crop {
+                seq: f.label.frame as u32,
+                capture: at(f.label.t),
+                u: m.u as f32,
+                v: m.v as f32,
+                radius: m.radius as f32,
+                width: 60,
+                height: 60,
+                pixels: &f.crop.rgb,
+            };
+            spins.extend(stream.crop(&c, &mut |e| events.push(e)));
+            // A repeated crop (same capture time) is dropped, not counted twice.
+            assert!(stream.crop(&c, &mut |e| events.push(e)).is_none());
+        }
+        let last = at(seq.frames.last().unwrap().label.t);
+        assert!(stream.poll(last + Duration::from_millis(50), &mut |e| events.push(e)).is_none());
+        assert_eq!(spins.len(), 1, "{events:?}");
+        let s = spins[0];
+        assert!((s.spin - truth).norm() < 0.15 * truth.norm(), "{:?} vs {truth:?}", s.spin);
+        assert!(s.cov.cholesky().is_some(), "covariance SPD");
+        let c = stream.counters();
+        assert_eq!((c.crops, c.dropped, c.sequences, c.fitted), (2 * SEQUENCE_LEN as u64, SEQUENCE_LEN as u64, 1, 1));
+    }
+}
