@@ -18,8 +18,8 @@ use std::thread::JoinHandle;
 
 use super::rt::{self, RtWarning};
 use super::telemetry::{
-    self, DatagramRecord, RECORDED_DATAGRAM, RECORDED_RSI, RSI_BYTES_RING, RsiRecord, TELEMETRY_RING, Telemetry,
-    TelemetryInputs, TelemetrySink, TelemetrySummary, TelemetryTx,
+    self, DatagramRecord, LOGO_RING, LogoRecord, RECORDED_DATAGRAM, RECORDED_RSI, RSI_BYTES_RING, RsiRecord,
+    TELEMETRY_RING, Telemetry, TelemetryInputs, TelemetrySink, TelemetrySummary, TelemetryTx,
 };
 use crate::calib::Calibration;
 use crate::estimator::{Estimator, EstimatorConfig};
@@ -131,6 +131,9 @@ pub struct DaemonSummary {
 /// The running daemon.
 #[derive(Debug)]
 pub struct Daemon {
+    /// The logo thread's end of the crop ring to the viewer (present when
+    /// the daemon has a sink; take it with `Option::take`).
+    pub logo_tx: Option<TelemetryTx<LogoRecord>>,
     pub tracker_addr: SocketAddr,
     pub rsi_addr: SocketAddr,
     stop: Arc<AtomicBool>,
@@ -202,6 +205,13 @@ impl Daemon {
         } else {
             (None, None)
         };
+        // The logo thread's crops for the viewer: only when there is a sink.
+        let (logo_tx, logo_rx) = if sink.is_some() {
+            let (tx, rx) = telemetry::ring(&dropped, LOGO_RING);
+            (Some(tx), Some(rx))
+        } else {
+            (None, None)
+        };
         let (obs_tx, obs_rx) = rtrb::RingBuffer::<ObsItem>::new(OBSERVATION_RING);
         let (plan_tx, plan_rx) = plan_slot();
 
@@ -236,6 +246,7 @@ impl Daemon {
                 let inputs = TelemetryInputs {
                     rings: vec![rx_ingest, rx_est, rx_rsi],
                     rsi_bytes: bytes_rx,
+                    logo: logo_rx,
                     log_interval: interval,
                     sink,
                 };
@@ -243,6 +254,7 @@ impl Daemon {
             })?
         };
         Ok(Daemon {
+            logo_tx,
             tracker_addr,
             rsi_addr,
             stop,
@@ -377,6 +389,8 @@ fn estimator_loop(
             for e in out.events {
                 tx.push(Telemetry::Estimator(e));
             }
+            let track = est.tracking().map(|(id, ekf)| (id, ekf.state()));
+            tx.push(Telemetry::Observed { capture: item.accepted.capture, pos: item.accepted.pos, track });
         }
         if !any {
             if busy_poll {
