@@ -153,10 +153,13 @@ pub fn run_loopback(cfg: &DemoConfig, cal: &Calibration) -> std::io::Result<Loop
     let starts = schedule(&ends, cfg.gap);
 
     let mut rcfg = cfg.runtime.clone();
-    rcfg.tracker_noise = cfg.tracker.noise_sigma.max(1e-4);
     // The simulated tracker's capture-to-arrival latency is known here; on
     // the robot it is measured once and configured (tracker.fixed_latency_ms).
-    rcfg.tracker_fixed_latency = Duration::from_nanos((cfg.tracker.latency * 1e9) as u64);
+    // Through the daemon configuration (what a recording carries), so that
+    // `topspin replay` of a demo recording sets up the same estimator.
+    let dcfg = demo_daemon_config(cfg);
+    rcfg.tracker_noise = dcfg.tracker_noise_m();
+    rcfg.tracker_fixed_latency = Duration::from_nanos(dcfg.fixed_latency_ns());
     let truth = crate::viewer::DemoTruth::default();
     let sink = viewer_sink(cfg, &mut rcfg, cal, &truth)?;
     let daemon = Daemon::start(&rcfg, cal, sink)?;
@@ -217,6 +220,14 @@ pub fn run_loopback(cfg: &DemoConfig, cal: &Calibration) -> std::io::Result<Loop
     Ok(LoopbackRun { balls, starts, t0, mock, daemon })
 }
 
+/// The daemon configuration the demo amounts to (tracker noise and latency).
+fn demo_daemon_config(cfg: &DemoConfig) -> crate::config::DaemonConfig {
+    let mut d = crate::config::DaemonConfig::default();
+    d.tracker.noise_mm = cfg.tracker.noise_sigma.max(1e-4) * 1e3;
+    d.tracker.fixed_latency_ms = cfg.tracker.latency * 1e3;
+    d
+}
+
 /// The telemetry sink for `--live` and/or `--record`: the viewer (with
 /// the demo's truth for its verdicts) and the recording; RSI bytes are
 /// pushed to telemetry then (the TCP in the view).
@@ -250,7 +261,7 @@ fn viewer_sink(
     let recording = match &cfg.record {
         Some(path) => {
             let files = crate::record::calib_files(None).map_err(std::io::Error::other)?;
-            let rec = crate::record::Recorder::create(path, &crate::config::DaemonConfig::default(), &files)
+            let rec = crate::record::Recorder::create(path, &demo_daemon_config(cfg), &files)
                 .map_err(std::io::Error::other)?;
             Some(crate::record::sink::RecordingSink::new(rec))
         }

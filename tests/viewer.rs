@@ -6,7 +6,8 @@
 //!   schemas, stamped with wall-clock log times;
 //! - recorded: the demo's MCAP file opens with the `mcap` crate and holds
 //!   every channel (the recording's own and the viewer's), with messages on
-//!   the scene and plot channels, and `record::read_session` still reads it.
+//!   the scene and plot channels, `record::read_session` still reads it and
+//!   `topspin replay`'s comparison finds every plan identical.
 //!
 //! No timing is asserted: the mock's answer deadline is stretched as in
 //! `tests/demo.rs`, and the verdicts are not checked here.
@@ -20,6 +21,7 @@ use foxglove::Decode;
 use foxglove::messages::{FrameTransform, PosesInFrame, SceneUpdate};
 use topspin::calib::Calibration;
 use topspin::demo::{DemoConfig, run};
+use topspin::record::replay::replay_session;
 use topspin::record::{TOPIC_COUNTERS, TOPIC_DATAGRAM, TOPIC_PLAN, TOPIC_RSI, read_session};
 use topspin::time::Duration;
 use topspin::viewer::{TOPICS, Topic, probe};
@@ -143,6 +145,9 @@ fn a_demo_recording_opens_and_holds_every_channel() {
     let session = read_session(&path).unwrap();
     assert!(session.truncated.is_none(), "{:?}", session.truncated);
     assert!(!session.plans.is_empty());
+    // The demo's recording replays bit for bit, as the daemon's does.
+    let replay = replay_session(&session).unwrap();
+    assert!(replay.identical(), "{:?}", replay.first_difference);
     // Counters come back on the monotonic clock (the log-time offset removed).
     let first_datagram = session.observations.first().unwrap().arrival;
     for (at, _) in &session.counters {

@@ -311,7 +311,8 @@ mod tests {
         let m = crate::motion::limits::rot_zyx(a, b, c);
         let q = quat_zyx(a, b, c);
         for v in [Vec3::x(), Vec3::y(), Vec3::z()] {
-            assert!((rotate(q, v) - m * v).norm() < 1e-12);
+            let mv = Vec3::from(std::array::from_fn(|i| (0..3).map(|j| m[i][j] * v[j]).sum::<f64>()));
+            assert!((rotate(q, v) - mv).norm() < 1e-12);
         }
     }
 

@@ -209,7 +209,7 @@ impl ViewerSink {
                 .iter()
                 .flat_map(|&(x0, y0, x1, y1)| [p3(Vec3::new(x0, y0, 0.001)), p3(Vec3::new(x1, y1, 0.001))])
                 .collect(),
-                color: Some(white.clone()),
+                color: Some(white),
                 ..Default::default()
             }],
             ..Default::default()
@@ -238,7 +238,7 @@ impl ViewerSink {
                 billboard: true,
                 font_size: 14.0,
                 scale_invariant: true,
-                color: Some(white.clone()),
+                color: Some(white),
                 text: self.cal.robot.robot.model.clone(),
             }],
             ..Default::default()
