@@ -7,7 +7,8 @@
 //! - recorded: the demo's MCAP file opens with the `mcap` crate and holds
 //!   every channel (the recording's own and the viewer's), with messages on
 //!   the scene and plot channels, `record::read_session` still reads it and
-//!   `topspin replay`'s comparison finds every plan identical.
+//!   `topspin replay`'s comparison finds every plan identical, and its
+//!   `--live` path (the recording through the viewer) reaches a client.
 //!
 //! No timing is asserted: the mock's answer deadline is stretched as in
 //! `tests/demo.rs`, and the verdicts are not checked here.
@@ -24,7 +25,8 @@ use topspin::demo::{DemoConfig, run};
 use topspin::record::replay::replay_session;
 use topspin::record::{TOPIC_COUNTERS, TOPIC_DATAGRAM, TOPIC_PLAN, TOPIC_RSI, read_session};
 use topspin::time::Duration;
-use topspin::viewer::{TOPICS, Topic, probe};
+use topspin::viewer::replay::view_session;
+use topspin::viewer::{LiveServer, TOPICS, Topic, ViewerSink, probe};
 
 /// 2020-01-01 in Unix ns: log times are wall clock, not the monotonic clock.
 const WALL_CLOCK_AFTER: u64 = 1_577_836_800_000_000_000;
@@ -148,6 +150,25 @@ fn a_demo_recording_opens_and_holds_every_channel() {
     // The demo's recording replays bit for bit, as the daemon's does.
     let replay = replay_session(&session).unwrap();
     assert!(replay.identical(), "{:?}", replay.first_difference);
+    // `topspin replay FILE --live`: the recording through the viewer to a client.
+    let server = LiveServer::start("127.0.0.1:0".parse().unwrap(), None).unwrap();
+    let stop = Arc::new(AtomicBool::new(false));
+    let client = probe::spawn(server.addr(), stop.clone(), std::time::Duration::from_secs(30));
+    let patience = std::time::Instant::now();
+    while server.clients() == 0 && patience.elapsed() < std::time::Duration::from_secs(30) {
+        std::thread::sleep(std::time::Duration::from_millis(10));
+    }
+    std::thread::sleep(std::time::Duration::from_millis(500)); // its subscriptions
+    let cal = session.calibration().unwrap();
+    let mut sink = ViewerSink::new(&cal, Some(server), None, None).with_offset(session.log_time_offset);
+    view_session(&session, &mut sink, None, &AtomicBool::new(false)).unwrap();
+    drop(sink);
+    stop.store(true, Ordering::Relaxed);
+    let seen = client.join().unwrap().unwrap();
+    for t in [Topic::Ball, Topic::Robot, Topic::Spin, Topic::Rsi] {
+        assert!(seen.channels[t.name()].messages > 0, "replay sent nothing on {}", t.name());
+    }
+
     // Counters come back on the monotonic clock (the log-time offset removed).
     let first_datagram = session.observations.first().unwrap().arrival;
     for (at, _) in &session.counters {
