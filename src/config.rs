@@ -230,6 +230,22 @@ pub struct LogoConfig {
     pub core: Core,
 }
 
+/// `[viewer]`: the live Foxglove view (see [`crate::viewer`]).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ViewerConfig {
+    /// Serve the live view (`topspin run --live` turns it on too).
+    pub live: bool,
+    /// Where: loopback by default; the lab network's address to watch from elsewhere.
+    pub live_bind: SocketAddr,
+}
+
+impl Default for ViewerConfig {
+    fn default() -> Self {
+        ViewerConfig { live: false, live_bind: SocketAddr::from(([127, 0, 0, 1], 8765)) }
+    }
+}
+
 /// `[calib]`: which calibration.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -255,6 +271,9 @@ pub struct DaemonConfig {
     pub rsi: RsiConfig,
     pub telemetry: TelemetryConfig,
     pub recording: RecordingConfig,
+    /// Absent in recordings made before it existed.
+    #[serde(default)]
+    pub viewer: ViewerConfig,
     pub calib: CalibConfig,
     pub logo: LogoConfig,
 }
@@ -284,6 +303,7 @@ impl Default for DaemonConfig {
             rsi: RsiConfig { sentype: "ImFree".to_owned() },
             telemetry: TelemetryConfig { log_interval_s: 10.0, log_level: "info".to_owned() },
             recording: RecordingConfig { enabled: false, dir: PathBuf::from("/var/lib/topspin") },
+            viewer: ViewerConfig::default(),
             calib: CalibConfig { dir: PathBuf::new() },
             logo: LogoConfig {
                 enabled: false,

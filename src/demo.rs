@@ -14,7 +14,8 @@
 //! (`calib/strike.toml`) cannot be reached; they are reported, and the hit
 //! rate is over the reachable ones.
 
-use std::net::UdpSocket;
+use std::net::{SocketAddr, UdpSocket};
+use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
 
 use serde::Serialize;
@@ -55,7 +56,17 @@ pub struct DemoConfig {
     /// Tests on a shared machine stretch it so that the machine's own
     /// scheduling noise is counted (`answers_after_cycle`), not failed.
     pub answer_deadline: Option<Duration>,
+    /// Serve the live Foxglove view here (see [`crate::viewer`]).
+    pub live: Option<SocketAddr>,
+    /// Before the first ball, wait up to this long for a live client (then
+    /// [`LIVE_SETTLE`] for its subscriptions).
+    pub live_wait: Duration,
+    /// Record the session (MCAP, with the viewer's channels) to this file.
+    pub record: Option<PathBuf>,
 }
+
+/// After a live client connects, time given it to subscribe.
+pub const LIVE_SETTLE: Duration = Duration::from_millis(500);
 
 impl Default for DemoConfig {
     fn default() -> Self {
@@ -66,6 +77,9 @@ impl Default for DemoConfig {
             gap: 1.5,
             runtime: RuntimeConfig::loopback(),
             answer_deadline: None,
+            live: None,
+            live_wait: Duration::from_nanos(0),
+            record: None,
         }
     }
 }
@@ -157,11 +171,16 @@ pub fn run_loopback(cfg: &DemoConfig, cal: &Calibration) -> std::io::Result<Loop
         l.camera_latency = Duration::from_nanos((cfg.tracker.latency * 1e9) as u64);
         render_crops(cal, &l.camera, cfg.seed, &balls)
     });
-    rcfg.tracker_noise = cfg.tracker.noise_sigma.max(1e-4);
     // The simulated tracker's capture-to-arrival latency is known here; on
     // the robot it is measured once and configured (tracker.fixed_latency_ms).
-    rcfg.tracker_fixed_latency = Duration::from_nanos((cfg.tracker.latency * 1e9) as u64);
-    let daemon = Daemon::start(&rcfg, cal, None)?;
+    // Through the daemon configuration (what a recording carries), so that
+    // `topspin replay` of a demo recording sets up the same estimator.
+    let dcfg = demo_daemon_config(cfg);
+    rcfg.tracker_noise = dcfg.tracker_noise_m();
+    rcfg.tracker_fixed_latency = Duration::from_nanos(dcfg.fixed_latency_ns());
+    let truth = crate::viewer::DemoTruth::default();
+    let sink = viewer_sink(cfg, &mut rcfg, cal, &truth)?;
+    let daemon = Daemon::start(&rcfg, cal, sink)?;
     let mut mcfg = MockKrcConfig::default_cell().map_err(|e| std::io::Error::other(e.to_string()))?;
     mcfg.sensor = daemon.rsi_addr;
     mcfg.bind = "127.0.0.1:0".parse().expect("literal");
@@ -175,6 +194,22 @@ pub fn run_loopback(cfg: &DemoConfig, cal: &Calibration) -> std::io::Result<Loop
     let tracker = UdpSocket::bind("127.0.0.1:0")?;
     tracker.connect(daemon.tracker_addr)?;
     let t0 = runtime::now() + Duration::from_nanos((LEAD_IN * 1e9) as u64);
+    let _ = truth.set(
+        balls
+            .iter()
+            .zip(&starts)
+            .filter_map(|(b, &start)| {
+                let h = b.truth.hit.as_ref()?;
+                Some(crate::viewer::sink::TrueHit {
+                    ball: b.index,
+                    t: capture_time(t0, start, h.t),
+                    pos: Vec3::from(h.pos),
+                    vel: Vec3::from(h.vel),
+                    reachable: reachable(cal, b),
+                })
+            })
+            .collect(),
+    );
     let camera = match (daemon.crops_addr, &crops) {
         (Some(addr), Some(seqs)) => {
             let socket = UdpSocket::bind("127.0.0.1:0")?;
@@ -213,6 +248,56 @@ pub fn run_loopback(cfg: &DemoConfig, cal: &Calibration) -> std::io::Result<Loop
     let mock = mock.stop()?;
     let daemon = daemon.join()?;
     Ok(LoopbackRun { balls, starts, t0, mock, daemon })
+}
+
+/// The daemon configuration the demo amounts to (tracker noise and latency).
+fn demo_daemon_config(cfg: &DemoConfig) -> crate::config::DaemonConfig {
+    let mut d = crate::config::DaemonConfig::default();
+    d.tracker.noise_mm = cfg.tracker.noise_sigma.max(1e-4) * 1e3;
+    d.tracker.fixed_latency_ms = cfg.tracker.latency * 1e3;
+    d
+}
+
+/// The telemetry sink for `--live` and/or `--record`: the viewer (with
+/// the demo's truth for its verdicts) and the recording; RSI bytes are
+/// pushed to telemetry then (the TCP in the view).
+fn viewer_sink(
+    cfg: &DemoConfig,
+    rcfg: &mut RuntimeConfig,
+    cal: &Calibration,
+    truth: &crate::viewer::DemoTruth,
+) -> std::io::Result<Option<Box<dyn crate::runtime::telemetry::TelemetrySink>>> {
+    if cfg.live.is_none() && cfg.record.is_none() {
+        return Ok(None);
+    }
+    rcfg.record_rsi = true;
+    let live = match cfg.live {
+        Some(addr) => {
+            let server = crate::viewer::LiveServer::start(addr, rcfg.telemetry.core).map_err(std::io::Error::other)?;
+            tracing::info!(target: "topspin::viewer", "live view on ws://{}", server.addr());
+            if cfg.live_wait.0 > 0 {
+                let until = runtime::now() + cfg.live_wait;
+                while server.clients() == 0 && runtime::now() < until {
+                    std::thread::sleep(std::time::Duration::from_millis(20));
+                }
+                if server.clients() > 0 {
+                    std::thread::sleep(std::time::Duration::from_nanos(LIVE_SETTLE.0));
+                }
+            }
+            Some(server)
+        }
+        None => None,
+    };
+    let recording = match &cfg.record {
+        Some(path) => {
+            let files = crate::record::calib_files(None).map_err(std::io::Error::other)?;
+            let rec = crate::record::Recorder::create(path, &demo_daemon_config(cfg), &files)
+                .map_err(std::io::Error::other)?;
+            Some(crate::record::sink::RecordingSink::new(rec))
+        }
+        None => None,
+    };
+    Ok(Some(Box::new(crate::viewer::ViewerSink::new(cal, live, recording, Some(truth.clone())))))
 }
 
 /// The last plan of the trajectory whose hit is nearest the true one.

@@ -49,4 +49,5 @@ pub mod runtime;
 pub mod sim;
 pub mod systemd;
 pub mod time;
+pub mod viewer;
 pub mod wire;

@@ -42,6 +42,15 @@ pub struct DemoArgs {
     /// --logo cnn: auto, tract or onnxruntime.
     #[arg(long, value_enum, default_value = "auto")]
     pub backend: crate::logo::cnn::Backend,
+    /// Serve the live Foxglove view (WebSocket) on ADDR (default 127.0.0.1:8765).
+    #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = crate::viewer::DEFAULT_LIVE_ADDR)]
+    pub live: Option<std::net::SocketAddr>,
+    /// With --live: wait up to this long (s) for Foxglove to connect before the first ball.
+    #[arg(long, default_value_t = 0.0)]
+    pub live_wait: f64,
+    /// Record the session to this MCAP file (the viewer's channels included).
+    #[arg(long, value_name = "FILE")]
+    pub record: Option<std::path::PathBuf>,
 }
 
 pub fn run(a: DemoArgs) -> anyhow::Result<()> {
@@ -82,6 +91,9 @@ pub fn run(a: DemoArgs) -> anyhow::Result<()> {
         tracker: TrackerModel { noise_sigma: a.noise_mm * 1e-3, dropout: a.dropout, ..TrackerModel::default() },
         gap: a.gap,
         answer_deadline: a.answer_deadline_ms.map(crate::time::Duration::from_millis),
+        live: a.live,
+        live_wait: crate::time::Duration::from_nanos((a.live_wait.max(0.0) * 1e9) as u64),
+        record: a.record.clone(),
         ..DemoConfig::default()
     };
     if !a.json {
@@ -91,6 +103,9 @@ pub fn run(a: DemoArgs) -> anyhow::Result<()> {
             a.noise_mm,
             a.balls as f64 * a.gap + 1.5
         );
+    }
+    if let Some(addr) = a.live {
+        eprintln!("topspin demo: live view on ws://{addr} (Foxglove: Open connection → Foxglove WebSocket)");
     }
     let report = run_demo(&cfg, &cal)?;
     if a.json {

@@ -9,6 +9,8 @@ use clap::Args;
 
 use super::BadInput;
 use crate::record::{read_session, replay::replay_session};
+use crate::viewer::replay::view_session;
+use crate::viewer::{LiveServer, ViewerSink};
 
 #[derive(Debug, Args)]
 pub struct ReplayArgs {
@@ -17,6 +19,34 @@ pub struct ReplayArgs {
     /// Print the report as one JSON object instead of a summary.
     #[arg(long)]
     pub json: bool,
+    /// Then show the session in the live Foxglove view on ADDR (default
+    /// 127.0.0.1:8765), replayed through the estimator as it ran.
+    #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = crate::viewer::DEFAULT_LIVE_ADDR)]
+    pub live: Option<std::net::SocketAddr>,
+    /// With --live: recorded seconds per second (0: as fast as it goes).
+    #[arg(long, default_value_t = 1.0)]
+    pub speed: f64,
+    /// With --live: wait up to this long (s) for Foxglove to connect first.
+    #[arg(long, default_value_t = 30.0)]
+    pub live_wait: f64,
+}
+
+/// Serves the session in the live view (after the comparison).
+fn live(args: &ReplayArgs, session: &crate::record::Session, addr: std::net::SocketAddr) -> anyhow::Result<()> {
+    let server = LiveServer::start(addr, None).map_err(|e| BadInput(e.to_string()))?;
+    eprintln!("live view on ws://{} (Foxglove: Open connection → Foxglove WebSocket)", server.addr());
+    let until = std::time::Instant::now() + std::time::Duration::from_secs_f64(args.live_wait.max(0.0));
+    while server.clients() == 0 && std::time::Instant::now() < until {
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    std::thread::sleep(std::time::Duration::from_millis(500));
+    let cal = session.calibration().map_err(|e| BadInput(e.to_string()))?;
+    let mut sink = ViewerSink::new(&cal, Some(server), None, None).with_offset(session.log_time_offset);
+    let stop = std::sync::atomic::AtomicBool::new(false);
+    let speed = (args.speed > 0.0).then_some(args.speed);
+    view_session(session, &mut sink, speed, &stop).map_err(|e| BadInput(e.to_string()))?;
+    eprintln!("live view: {} messages sent", sink.sent());
+    Ok(())
 }
 
 pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
@@ -47,6 +77,9 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
             println!("  recorded {}", d.recorded.as_deref().unwrap_or("-"));
             println!("  replayed {}", d.replayed.as_deref().unwrap_or("-"));
         }
+    }
+    if let Some(addr) = args.live {
+        live(&args, &session, addr)?;
     }
     if report.identical() {
         Ok(())

@@ -23,6 +23,7 @@ use crate::runtime::daemon::{Daemon, LogoMethodChoice, LogoRuntime, RuntimeConfi
 use crate::runtime::telemetry::TelemetrySink;
 use crate::systemd::Notifier;
 use crate::time::Duration;
+use crate::viewer::{LiveServer, ViewerSink};
 
 #[derive(Debug, Args)]
 pub struct RunArgs {
@@ -32,6 +33,9 @@ pub struct RunArgs {
     /// Print the effective configuration and exit.
     #[arg(long)]
     pub print_config: bool,
+    /// Serve the live Foxglove view (WebSocket) on ADDR (default: `[viewer] live_bind`).
+    #[arg(long, value_name = "ADDR", num_args = 0..=1)]
+    pub live: Option<Option<std::net::SocketAddr>>,
 }
 
 /// The threads' settings from the daemon configuration (and, for the logo
@@ -96,7 +100,7 @@ pub fn run(a: RunArgs) -> anyhow::Result<()> {
     let cal = Calibration::load(cfg.calib.dir()).map_err(|e| BadInput(e.to_string()))?;
     let rt = runtime_config(&cfg)?;
     init_logging(&cfg.telemetry.log_level);
-    let sink: Option<Box<dyn TelemetrySink>> = if cfg.recording.enabled {
+    let recording = if cfg.recording.enabled {
         let dir = &cfg.recording.dir;
         std::fs::create_dir_all(dir).map_err(|e| BadInput(format!("recording.dir {}: {e}", dir.display())))?;
         let stamp = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_secs());
@@ -104,11 +108,30 @@ pub fn run(a: RunArgs) -> anyhow::Result<()> {
         let files = calib_files(cfg.calib.dir()).map_err(|e| BadInput(e.to_string()))?;
         let rec = Recorder::create(&path, &cfg, &files).map_err(|e| BadInput(e.to_string()))?;
         tracing::info!(target: "topspin", "recording to {}", path.display());
-        Some(Box::new(RecordingSink::new(rec)))
+        Some(RecordingSink::new(rec))
     } else {
         None
     };
-    let daemon = Daemon::start(&rt, &cal, sink).map_err(|e| anyhow::anyhow!("starting the daemon: {e}"))?;
+    let live_addr = match a.live {
+        Some(addr) => Some(addr.unwrap_or(cfg.viewer.live_bind)),
+        None => cfg.viewer.live.then_some(cfg.viewer.live_bind),
+    };
+    let live = match live_addr {
+        Some(addr) => {
+            let server = LiveServer::start(addr, cfg.threads.telemetry_core.0).map_err(|e| BadInput(e.to_string()))?;
+            tracing::info!(target: "topspin", "live view on ws://{}", server.addr());
+            Some(server)
+        }
+        None => None,
+    };
+    let mut rcfg = rt;
+    // The viewer shows the TCP from the RSI exchanges.
+    rcfg.record_rsi |= live.is_some();
+    let sink: Option<Box<dyn TelemetrySink>> = match (live, recording) {
+        (None, None) => None,
+        (live, recording) => Some(Box::new(ViewerSink::new(&cal, live, recording, None))),
+    };
+    let daemon = Daemon::start(&rcfg, &cal, sink).map_err(|e| anyhow::anyhow!("starting the daemon: {e}"))?;
     tracing::info!(
         target: "topspin",
         "running: tracker datagrams on {}, RSI on {}",

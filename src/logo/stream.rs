@@ -63,6 +63,15 @@ pub enum LogoEvent {
     InferenceFailed,
 }
 
+/// The logo in the latest crop, as the CNN saw it.
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub struct SeenLogo {
+    /// Its centre in the crop, px.
+    pub crop_px: [f32; 2],
+    /// Its direction on the ball, table frame.
+    pub table: crate::physics::Vec3,
+}
+
 /// Counters of the logo thread.
 #[derive(Copy, Clone, Debug, Default, PartialEq, Eq, serde::Serialize)]
 pub struct LogoCounters {
@@ -149,6 +158,21 @@ impl LogoStream {
             return r.or(out);
         }
         out
+    }
+
+    /// The logo in the latest crop, once the network has run on it (the
+    /// CNN runs in batches; the background method reports per sequence).
+    pub fn last_logo(&self) -> Option<SeenLogo> {
+        let i = self.times.len().checked_sub(1)?;
+        let o = self.outputs.get(i)?.seen(cnn::VISIBLE_THRESHOLD)?;
+        let c = self.circles[i];
+        let view = BallView::new(&self.cam, c.u, c.v, c.radius)?;
+        let (du, dv) = view.from_disc(o.x, o.y);
+        let (x0, y0) = crop_origin(c.u, c.v, cnn::INPUT_SIZE as u32, cnn::INPUT_SIZE as u32);
+        Some(SeenLogo {
+            crop_px: [(c.u + du - x0 as f64) as f32, (c.v + dv - y0 as f64) as f32],
+            table: self.cam.table_from_camera * view.to_camera(&o),
+        })
     }
 
     /// Ends a sequence that has gone quiet; call now and then.

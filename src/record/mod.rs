@@ -11,8 +11,15 @@
 //! TOML texts) and a metadata record `topspin` (version, clock), so a
 //! recording needs nothing else to be replayed. Then one channel per topic,
 //! JSON messages (`message_encoding = "json"`) each with a JSON Schema
-//! (`schema encoding = "jsonschema"`), log time = the daemon's monotonic
-//! clock in ns ([`crate::runtime::now`], not wall time):
+//! (`schema encoding = "jsonschema"`), log time = wall-clock ns since the
+//! Unix epoch (so Foxglove's timeline shows the date): the daemon's
+//! monotonic clock ([`crate::runtime::now`]) plus the offset
+//! [`crate::runtime::unix_offset_ns`] taken once at start, kept in the
+//! metadata as [`META_LOG_TIME_OFFSET`]. The `*_ns` fields inside the
+//! messages stay on the monotonic clock (what replay uses). Beside these, the
+//! viewer's channels ([`crate::viewer`], Foxglove's protobuf schemas and
+//! JSON plots) with the same log times, so a recording opened in Foxglove
+//! looks like the live view:
 //!
 //! | topic | log time | message |
 //! |---|---|---|
@@ -76,8 +83,10 @@ pub const ATTACHMENT_CALIB_PREFIX: &str = "calib/";
 pub const CALIB_FILES: [&str; 4] = ["physics.toml", "table.toml", "strike.toml", "robot.toml"];
 /// Uncompressed size at which a chunk closes by itself, bytes.
 pub const CHUNK_SIZE: u64 = 256 * 1024;
-/// The MCAP profile field.
+/// The MCAP profile field (and the name of the metadata record).
 pub const PROFILE: &str = "topspin";
+/// Metadata key: log time − the daemon's monotonic clock, ns (log times are wall clock).
+pub const META_LOG_TIME_OFFSET: &str = "log_time_offset_ns";
 
 /// A recording that cannot be written or read.
 #[derive(Debug, thiserror::Error)]

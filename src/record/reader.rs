@@ -7,8 +7,8 @@ use std::path::Path;
 use mcap::records::Record;
 
 use super::{
-    ATTACHMENT_CALIB_PREFIX, ATTACHMENT_CONFIG, DatagramMsg, PlanMsg, RecordError, RsiMsg, TOPIC_COUNTERS,
-    TOPIC_DATAGRAM, TOPIC_PLAN, TOPIC_RSI, from_hex,
+    ATTACHMENT_CALIB_PREFIX, ATTACHMENT_CONFIG, DatagramMsg, META_LOG_TIME_OFFSET, PROFILE, PlanMsg, RecordError,
+    RsiMsg, TOPIC_COUNTERS, TOPIC_DATAGRAM, TOPIC_PLAN, TOPIC_RSI, from_hex,
 };
 use crate::calib::Calibration;
 use crate::config::DaemonConfig;
@@ -48,6 +48,8 @@ pub struct Session {
     /// The file ended before its summary (a crash): it holds what was
     /// flushed, and this says why reading stopped.
     pub truncated: Option<String>,
+    /// Log time − monotonic time, ns (the metadata's `log_time_offset_ns`; 0 in older files).
+    pub log_time_offset: u64,
 }
 
 impl Session {
@@ -100,8 +102,11 @@ pub fn read_session(path: &Path) -> Result<Session, RecordError> {
         exchanges: Vec::new(),
         counters: Vec::new(),
         truncated: None,
+        log_time_offset: 0,
     };
     let mut ended = false;
+    // Log times are wall clock (monotonic + this offset); 0 in older files.
+    let mut offset = 0u64;
     for record in reader {
         let record = match record {
             Ok(r) => r,
@@ -113,6 +118,10 @@ pub fn read_session(path: &Path) -> Result<Session, RecordError> {
         match record {
             Record::Channel(c) => {
                 topics.insert(c.id, c.topic);
+            }
+            Record::Metadata(m) if m.name == PROFILE => {
+                offset = m.metadata.get(META_LOG_TIME_OFFSET).and_then(|v| v.parse().ok()).unwrap_or(0);
+                s.log_time_offset = offset;
             }
             Record::Attachment { header, data, .. } => {
                 let text = String::from_utf8(data.into_owned())
@@ -153,7 +162,7 @@ pub fn read_session(path: &Path) -> Result<Session, RecordError> {
                     }
                     TOPIC_COUNTERS => {
                         let v = serde_json::from_slice(&data).map_err(|e| bad(&e.to_string()))?;
-                        s.counters.push((Instant::from_nanos(header.log_time), v));
+                        s.counters.push((Instant::from_nanos(header.log_time.saturating_sub(offset)), v));
                     }
                     _ => {} // a topic a later version added
                 }

@@ -27,6 +27,11 @@ impl RecordingSink {
         }
     }
 
+    /// One message of the viewer's channels (see [`crate::viewer`]).
+    pub fn view(&mut self, topic: crate::viewer::Topic, data: &[u8], log_time_ns: u64) {
+        self.write(|r| r.view(topic, data, log_time_ns));
+    }
+
     /// Finishes the file (index and summary).
     pub fn finish(mut self) {
         if let Some(r) = self.recorder.take()

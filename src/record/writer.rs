@@ -9,12 +9,13 @@ use std::path::{Path, PathBuf};
 use mcap::records::MessageHeader;
 
 use super::{
-    ATTACHMENT_CALIB_PREFIX, ATTACHMENT_CONFIG, CHUNK_SIZE, DatagramMsg, PROFILE, PlanMsg, RecordError, RsiMsg,
-    TOPIC_COUNTERS, TOPIC_DATAGRAM, TOPIC_PLAN, TOPIC_RSI, schema,
+    ATTACHMENT_CALIB_PREFIX, ATTACHMENT_CONFIG, CHUNK_SIZE, DatagramMsg, META_LOG_TIME_OFFSET, PROFILE, PlanMsg,
+    RecordError, RsiMsg, TOPIC_COUNTERS, TOPIC_DATAGRAM, TOPIC_PLAN, TOPIC_RSI, schema,
 };
 use crate::config::DaemonConfig;
 use crate::plan::StrikePlan;
 use crate::time::Instant;
+use crate::viewer::{TOPICS, Topic};
 
 /// A buffered file whose `flush` also reaches the disk (`fdatasync`).
 struct SyncFile {
@@ -52,6 +53,10 @@ pub struct Recorder {
     plan: Channel,
     rsi: Channel,
     counters: Channel,
+    /// The viewer's channels, in [`TOPICS`] order.
+    view: Vec<Channel>,
+    /// Added to the monotonic times to make the log times (wall clock).
+    offset: u64,
     messages: u64,
 }
 
@@ -90,7 +95,12 @@ impl Recorder {
             std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_nanos() as u64);
         let mut meta = BTreeMap::new();
         meta.insert("version".to_owned(), env!("CARGO_PKG_VERSION").to_owned());
-        meta.insert("clock".to_owned(), "log times: the daemon's monotonic clock, ns since its start".to_owned());
+        let offset = crate::runtime::unix_offset_ns();
+        meta.insert(
+            "clock".to_owned(),
+            "log times: Unix ns (the daemon's monotonic clock + log_time_offset_ns); *_ns fields: monotonic".to_owned(),
+        );
+        meta.insert(META_LOG_TIME_OFFSET.to_owned(), offset.to_string());
         meta.insert("created_unix_ns".to_owned(), now_unix_ns.to_string());
         writer
             .write_metadata(&mcap::records::Metadata { name: PROFILE.to_owned(), metadata: meta })
@@ -118,8 +128,15 @@ impl Recorder {
         let plan = channel(TOPIC_PLAN, "topspin.StrikePlan", schema::PLAN).map_err(mcap_err)?;
         let rsi = channel(TOPIC_RSI, "topspin.RsiExchange", schema::RSI).map_err(mcap_err)?;
         let counters = channel(TOPIC_COUNTERS, "topspin.Counters", schema::COUNTERS).map_err(mcap_err)?;
+        let mut view = Vec::with_capacity(TOPICS.len());
+        for t in TOPICS {
+            let s = t.schema();
+            let schema_id = writer.add_schema(&s.name, &s.encoding, &s.data).map_err(mcap_err)?;
+            let id = writer.add_channel(schema_id, t.name(), t.encoding(), &BTreeMap::new()).map_err(mcap_err)?;
+            view.push(Channel { id, sequence: 0 });
+        }
         writer.flush().map_err(mcap_err)?;
-        Ok(Recorder { path: path.to_owned(), writer, datagram, plan, rsi, counters, messages: 0 })
+        Ok(Recorder { path: path.to_owned(), writer, datagram, plan, rsi, counters, view, offset, messages: 0 })
     }
 
     /// The file being written.
@@ -137,17 +154,32 @@ impl Recorder {
     }
 
     fn write(&mut self, which: fn(&mut Recorder) -> &mut Channel, at: Instant, json: &[u8]) -> Result<(), RecordError> {
-        let ch = which(self);
-        let header = MessageHeader {
-            channel_id: ch.id,
-            sequence: ch.sequence,
-            log_time: at.as_nanos(),
-            publish_time: at.as_nanos(),
-        };
+        let log_time = at.as_nanos() + self.offset;
+        let id = which(self).id;
+        self.write_at(id, log_time, json)
+    }
+
+    fn write_at(&mut self, channel: u16, log_time: u64, data: &[u8]) -> Result<(), RecordError> {
+        let Some(ch) = self.channel_mut(channel) else { return Ok(()) };
+        let header = MessageHeader { channel_id: ch.id, sequence: ch.sequence, log_time, publish_time: log_time };
         ch.sequence = ch.sequence.wrapping_add(1);
-        self.writer.write_to_known_channel(&header, json).map_err(|e| self.mcap_err(e))?;
+        self.writer.write_to_known_channel(&header, data).map_err(|e| self.mcap_err(e))?;
         self.messages += 1;
         Ok(())
+    }
+
+    fn channel_mut(&mut self, id: u16) -> Option<&mut Channel> {
+        [&mut self.datagram, &mut self.plan, &mut self.rsi, &mut self.counters]
+            .into_iter()
+            .chain(self.view.iter_mut())
+            .find(|c| c.id == id)
+    }
+
+    /// One message of the viewer's `topic` (encoded as [`Topic::encoding`]),
+    /// log time `log_time_ns` (wall clock, as [`crate::viewer`] stamps it).
+    pub fn view(&mut self, topic: Topic, data: &[u8], log_time_ns: u64) -> Result<(), RecordError> {
+        let id = self.view[topic as usize].id;
+        self.write_at(id, log_time_ns, data)
     }
 
     fn json(&self, value: &impl serde::Serialize) -> Result<Vec<u8>, RecordError> {

@@ -19,8 +19,8 @@ use std::thread::JoinHandle;
 
 use super::rt::{self, RtWarning};
 use super::telemetry::{
-    self, DatagramRecord, RECORDED_DATAGRAM, RECORDED_RSI, RSI_BYTES_RING, RsiRecord, TELEMETRY_RING, Telemetry,
-    TelemetryInputs, TelemetrySink, TelemetrySummary, TelemetryTx,
+    self, DatagramRecord, LOGO_CROP_SIDE, LOGO_RING, LogoRecord, RECORDED_DATAGRAM, RECORDED_RSI, RSI_BYTES_RING, RsiRecord,
+    TELEMETRY_RING, Telemetry, TelemetryInputs, TelemetrySink, TelemetrySummary, TelemetryTx,
 };
 use crate::calib::Calibration;
 use crate::calib::camera::CameraCalib;
@@ -38,7 +38,7 @@ use crate::time::{Duration, Instant};
 use crate::wire::crop::{CROP_MAX_LEN, Crop};
 
 /// Capacity of the logo → estimator ring, spins (one per ball).
-pub const LOGO_RING: usize = 8;
+pub const LOGO_SPIN_RING: usize = 8;
 /// Receive timeout of the logo socket: ends quiet sequences, looks at the stop flag.
 pub const LOGO_POLL: std::time::Duration = std::time::Duration::from_millis(5);
 /// Capacity of the ingest → estimator ring, observations.
@@ -167,6 +167,9 @@ pub struct DaemonSummary {
 /// The running daemon.
 #[derive(Debug)]
 pub struct Daemon {
+    /// The logo thread's end of the crop ring to the viewer (present when
+    /// the daemon has a sink; take it with `Option::take`).
+    pub logo_tx: Option<TelemetryTx<LogoRecord>>,
     pub tracker_addr: SocketAddr,
     pub rsi_addr: SocketAddr,
     /// Where the logo thread receives crops, if it runs.
@@ -241,9 +244,16 @@ impl Daemon {
         } else {
             (None, None)
         };
+        // The logo thread's crops for the viewer: only when there is a sink.
+        let (logo_tx, logo_rx) = if sink.is_some() {
+            let (tx, rx) = telemetry::ring(&dropped, LOGO_RING);
+            (Some(tx), Some(rx))
+        } else {
+            (None, None)
+        };
         let (obs_tx, obs_rx) = rtrb::RingBuffer::<ObsItem>::new(OBSERVATION_RING);
         let (plan_tx, plan_rx) = plan_slot();
-        let (logo_tx, logo_rx) = rtrb::RingBuffer::<LogoSpin>::new(LOGO_RING);
+        let (spin_tx, spin_rx) = rtrb::RingBuffer::<LogoSpin>::new(LOGO_SPIN_RING);
         // The logo thread's socket and model first: a model that does not
         // load stops the start with its reason.
         let logo_parts = match &cfg.logo {
@@ -268,16 +278,19 @@ impl Daemon {
             let stop = stop.clone();
             let busy = cfg.estimator_busy_poll;
             spawn("estimator", cfg.estimator, cfg.realtime, &warnings, move || {
-                estimator_loop(est, obs_rx, logo_rx, plan_tx, tx_est, &stop, busy)
+                estimator_loop(est, obs_rx, spin_rx, plan_tx, tx_est, &stop, busy)
             })?
         };
+        // The viewer's crop ring goes to the logo thread when it runs.
+        let mut logo_tx = logo_tx;
         let logo = match logo_parts {
             Some((socket, stream, source, spec)) => {
+                let viewer = logo_tx.take();
                 let stop = stop.clone();
                 let latency = cfg.logo.as_ref().map_or(Duration(0), |l| l.camera_latency);
                 let est_thread = estimator.thread().clone();
                 Some(spawn("logo", spec, false, &warnings, move || {
-                    logo_loop(stream, socket, source, logo_tx, latency, &stop, &est_thread)
+                    logo_loop(stream, socket, source, spin_tx, viewer, latency, &stop, &est_thread)
                 })?)
             }
             None => None,
@@ -305,6 +318,7 @@ impl Daemon {
                 let inputs = TelemetryInputs {
                     rings: vec![rx_ingest, rx_est, rx_rsi],
                     rsi_bytes: bytes_rx,
+                    logo: logo_rx,
                     log_interval: interval,
                     sink,
                 };
@@ -312,6 +326,7 @@ impl Daemon {
             })?
         };
         Ok(Daemon {
+            logo_tx,
             tracker_addr,
             rsi_addr,
             crops_addr,
@@ -430,12 +445,15 @@ fn ingest_loop(
 }
 
 /// The logo thread: crops from the configured source → [`LogoStream`] →
-/// spins to the estimator (a full ring drops the spin: it is one ball's).
+/// spins to the estimator (a full ring drops the spin: it is one ball's);
+/// each crop with what was seen in it to the viewer, if one is attached.
+#[allow(clippy::too_many_arguments)] // the thread's whole world, once
 fn logo_loop(
     mut stream: LogoStream,
     socket: UdpSocket,
     source: Option<IpAddr>,
     mut spins: rtrb::Producer<LogoSpin>,
+    mut viewer: Option<TelemetryTx<LogoRecord>>,
     latency: Duration,
     stop: &AtomicBool,
     estimator: &std::thread::Thread,
@@ -456,7 +474,11 @@ fn logo_loop(
                     Ok(mut c) => {
                         // The camera's clock mapped onto ours, as the tracker's is.
                         c.capture = clock.map(c.capture.0, runtime::now());
-                        stream.crop(&c, &mut ignore)
+                        let spin = stream.crop(&c, &mut ignore);
+                        if let Some(v) = viewer.as_mut() {
+                            v.push(logo_record(&c, stream.last_logo()));
+                        }
+                        spin
                     }
                     Err(_) => {
                         malformed += 1;
@@ -474,6 +496,23 @@ fn logo_loop(
     let mut c = stream.counters();
     c.dropped += foreign + malformed;
     c
+}
+
+/// A crop for the viewer, with the logo where the method saw it.
+fn logo_record(c: &Crop<'_>, logo: Option<crate::logo::stream::SeenLogo>) -> LogoRecord {
+    let mut pixels = [0u8; 3 * LOGO_CROP_SIDE * LOGO_CROP_SIDE];
+    let n = c.pixels.len().min(pixels.len());
+    pixels[..n].copy_from_slice(&c.pixels[..n]);
+    LogoRecord {
+        capture: c.capture,
+        trajectory: 0,
+        width: c.width,
+        height: c.height,
+        pixels,
+        ball_px: [c.u, c.v, c.radius],
+        logo_px: logo.map(|l| l.crop_px),
+        logo_dir: logo.map(|l| l.table.into()),
+    }
 }
 
 fn estimator_loop(
@@ -506,6 +545,8 @@ fn estimator_loop(
             for e in out.events {
                 tx.push(Telemetry::Estimator(e));
             }
+            let track = est.tracking().map(|(id, ekf)| (id, ekf.state()));
+            tx.push(Telemetry::Observed { capture: item.accepted.capture, pos: item.accepted.pos, track });
         }
         if !any {
             if busy_poll {

@@ -25,6 +25,19 @@ pub fn now() -> Instant {
     Instant(epoch().elapsed().as_nanos() as u64)
 }
 
+/// Unix time (ns) minus [`now`], taken once per process: `now() + offset`
+/// is wall-clock time, for the log times of the recording and the live view
+/// (Foxglove's timeline), while everything else stays on the monotonic clock.
+pub fn unix_offset_ns() -> u64 {
+    static OFFSET: OnceLock<u64> = OnceLock::new();
+    *OFFSET.get_or_init(|| {
+        let mono = now().as_nanos();
+        let unix =
+            std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_nanos() as u64);
+        unix.saturating_sub(mono)
+    })
+}
+
 /// Waits until `deadline`: sleeps until `spin` before it, then spins.
 pub fn sleep_until(deadline: Instant, spin: Duration) {
     let t = now();

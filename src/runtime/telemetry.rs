@@ -14,6 +14,7 @@ use serde::Serialize;
 
 use crate::estimator::EstimatorEvent;
 use crate::ingest::{Dropped, IngestCounters};
+use crate::physics::{BallState, Vec3};
 use crate::plan::StrikePlan;
 use crate::rsi::session::SessionEvent;
 use crate::time::Instant;
@@ -70,6 +71,14 @@ pub enum Telemetry {
         published: Instant,
     },
     Rsi(SessionEvent),
+    /// One observation the estimator took (capture time on our clock,
+    /// position in T) and, when it tracks a ball after it, the trajectory
+    /// and its EKF state at that time (for the viewer).
+    Observed {
+        capture: Instant,
+        pos: Vec3,
+        track: Option<(u32, BallState)>,
+    },
     /// One RSI answer: request arrival and answer sent.
     Answer {
         arrival: Instant,
@@ -79,6 +88,43 @@ pub enum Telemetry {
 
 /// Capacity of the ring of RSI bytes (recording only), exchanges.
 pub const RSI_BYTES_RING: usize = 1024;
+/// Capacity of the ring of logo crops (live view / recording), crops.
+pub const LOGO_RING: usize = 64;
+/// Largest logo crop side kept for the viewer, px (as `wire::crop::CROP_MAX_SIDE`).
+pub const LOGO_CROP_SIDE: usize = 96;
+/// Seconds between queue-depth samples handed to the sink.
+pub const QUEUE_INTERVAL_S: f64 = 0.1;
+
+/// One ball crop of the logo thread with what it found (for the viewer):
+/// fixed-size and `Copy`, pushed through its own ring like the RSI bytes.
+#[derive(Copy, Clone, Debug)]
+pub struct LogoRecord {
+    /// Capture time of the crop.
+    pub capture: Instant,
+    pub trajectory: u32,
+    /// Crop size, px (each at most [`LOGO_CROP_SIDE`]).
+    pub width: u16,
+    pub height: u16,
+    /// Row-major pixels, `rgb8` (3 bytes a pixel), `width * height * 3` used.
+    pub pixels: [u8; 3 * LOGO_CROP_SIDE * LOGO_CROP_SIDE],
+    /// The ball in the crop: centre u, v and radius, px.
+    pub ball_px: [f32; 3],
+    /// The detected logo's centre in the crop, px (`None`: not seen).
+    pub logo_px: Option<[f32; 2]>,
+    /// The fitted logo direction on the ball, unit vector in the table frame.
+    pub logo_dir: Option<[f64; 3]>,
+}
+
+/// Ring occupancy seen by the telemetry thread, the most over a sample interval.
+#[derive(Copy, Clone, Debug, Default, Serialize)]
+pub struct QueueDepths {
+    /// One per telemetry ring (ingest, estimator, RSI), events waiting.
+    pub rings: [usize; 3],
+    /// RSI bytes ring (recording or live view), exchanges waiting.
+    pub rsi_bytes: usize,
+    /// Events dropped because a ring was full, since the start.
+    pub dropped: u64,
+}
 
 /// A hot thread's end of a telemetry ring.
 #[derive(Debug)]
@@ -102,6 +148,12 @@ pub trait TelemetrySink: Send {
     fn datagram(&mut self, _d: &DatagramRecord) {}
     fn plan(&mut self, _p: &StrikePlan) {}
     fn rsi(&mut self, _r: &RsiRecord) {}
+    /// Every event from the hot threads, after the calls above (the viewer).
+    fn event(&mut self, _e: &Telemetry) {}
+    /// One logo crop (the viewer).
+    fn logo(&mut self, _l: &LogoRecord) {}
+    /// The queue depths every [`QUEUE_INTERVAL_S`].
+    fn queues(&mut self, _q: &QueueDepths, _at: Instant) {}
     /// Called at each log interval and at the end.
     fn counters(&mut self, _json: &serde_json::Value, _at: Instant) {}
     fn flush(&mut self) {}
@@ -225,6 +277,8 @@ pub struct TelemetryInputs {
     pub rings: Vec<Consumer<Telemetry>>,
     /// RSI bytes, when recording.
     pub rsi_bytes: Option<Consumer<RsiRecord>>,
+    /// Logo crops, when the logo thread feeds the viewer.
+    pub logo: Option<Consumer<LogoRecord>>,
     /// Seconds between periodic logs.
     pub log_interval: f64,
     pub sink: Option<Box<dyn TelemetrySink>>,
@@ -239,13 +293,21 @@ pub fn run(
     ingest: &dyn Fn() -> IngestCounters,
     now: &dyn Fn() -> Instant,
 ) -> TelemetrySummary {
-    let TelemetryInputs { mut rings, mut rsi_bytes, log_interval, mut sink } = inputs;
+    let TelemetryInputs { mut rings, mut rsi_bytes, mut logo, log_interval, mut sink } = inputs;
     let mut s = TelemetrySummary::new();
     let mut next_log = now().as_secs_f64() + log_interval;
     let mut next_flush = now().as_secs_f64() + FLUSH_INTERVAL_S;
+    let mut next_queues = now().as_secs_f64() + QUEUE_INTERVAL_S;
+    let mut depths = QueueDepths::default();
     loop {
         let stopping = stop.load(Ordering::Acquire);
         let mut any = false;
+        for (i, ring) in rings.iter().enumerate().take(depths.rings.len()) {
+            depths.rings[i] = depths.rings[i].max(ring.slots());
+        }
+        if let Some(r) = rsi_bytes.as_ref() {
+            depths.rsi_bytes = depths.rsi_bytes.max(r.slots());
+        }
         for ring in rings.iter_mut() {
             while let Ok(e) = ring.pop() {
                 any = true;
@@ -260,7 +322,23 @@ pub fn run(
                 }
             }
         }
+        if let Some(ring) = logo.as_mut() {
+            while let Ok(l) = ring.pop() {
+                any = true;
+                if let Some(k) = sink.as_mut() {
+                    k.logo(&l);
+                }
+            }
+        }
         let t = now();
+        if t.as_secs_f64() >= next_queues {
+            next_queues = t.as_secs_f64() + QUEUE_INTERVAL_S;
+            depths.dropped = dropped.load(Ordering::Relaxed);
+            if let Some(k) = sink.as_mut() {
+                k.queues(&depths, t);
+            }
+            depths = QueueDepths::default();
+        }
         if t.as_secs_f64() >= next_log || stopping {
             next_log = t.as_secs_f64() + log_interval;
             s.telemetry_dropped = dropped.load(Ordering::Relaxed);
@@ -288,6 +366,13 @@ pub fn run(
 }
 
 fn handle(s: &mut TelemetrySummary, e: &Telemetry, sink: &mut Option<Box<dyn TelemetrySink>>) {
+    tally(s, e, sink);
+    if let Some(k) = sink {
+        k.event(e);
+    }
+}
+
+fn tally(s: &mut TelemetrySummary, e: &Telemetry, sink: &mut Option<Box<dyn TelemetrySink>>) {
     match e {
         Telemetry::Datagram(d) => {
             s.datagrams += 1;
@@ -353,5 +438,6 @@ fn handle(s: &mut TelemetrySummary, e: &Telemetry, sink: &mut Option<Box<dyn Tel
         Telemetry::Answer { arrival, sent } => {
             let _ = s.rsi_answer_us.record(us(*arrival, *sent));
         }
+        Telemetry::Observed { .. } => {}
     }
 }
