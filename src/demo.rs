@@ -16,12 +16,14 @@ use serde::Serialize;
 
 use crate::calib::Calibration;
 use crate::eval::stats::Summary;
+use crate::ingest::IngestCounters;
 use crate::mock_krc::{self, MockKrcConfig};
 use crate::physics::{Vec3, rad_to_rps};
 use crate::plan::StrikePlan;
 use crate::runtime::daemon::{Daemon, DaemonSummary, LinkState, RuntimeConfig};
 pub use crate::runtime::telemetry::{Latencies, Latency};
 use crate::runtime::{self};
+use crate::sim::faults::{InjectedCounts, TrackerFaults, inject, plan_datagrams, send_planned};
 use crate::sim::stream::{capture_time, stream};
 use crate::sim::{SimBall, TrackerModel, schedule, true_state_at};
 use crate::time::{Duration, Instant};
@@ -46,6 +48,13 @@ pub struct DemoConfig {
     /// Tests on a shared machine stretch it so that the machine's own
     /// scheduling noise is counted (`answers_after_cycle`), not failed.
     pub answer_deadline: Option<Duration>,
+    /// The mock's late-answer limit before it stops RSI; `None`: the
+    /// controller's (the context's Timeout). A soak raises it so that a
+    /// long run counts every late answer instead of stopping at the limit.
+    pub late_limit: Option<u64>,
+    /// Tracker-side faults injected into the stream (`sim::faults`); the
+    /// foreign ball comes from 127.0.0.2.
+    pub tracker_faults: Option<TrackerFaults>,
 }
 
 impl Default for DemoConfig {
@@ -57,6 +66,8 @@ impl Default for DemoConfig {
             gap: 1.5,
             runtime: RuntimeConfig::loopback(),
             answer_deadline: None,
+            late_limit: None,
+            tracker_faults: None,
         }
     }
 }
@@ -106,6 +117,16 @@ pub struct DemoReport {
     pub late_by_max_ms: f64,
     pub plans_rejected: u64,
     pub warnings: Vec<String>,
+    /// The daemon's tracker ingest counters (foreign, malformed, …).
+    pub ingest: IngestCounters,
+    /// What the tracker fault injector did (`None`: a clean stream).
+    pub tracker_faults: Option<InjectedCounts>,
+    /// Corrections the mock KR C4 had to clamp (POSCORR) or slow down to
+    /// the robot's limits, and whether its monitor stopped RSI: all zero
+    /// and false unless the daemon commanded something out of bounds.
+    pub poscorr_clamped: u64,
+    pub robot_limited: u64,
+    pub stopped_by_monitor: bool,
     pub per_ball: Vec<BallVerdict>,
 }
 
@@ -123,12 +144,15 @@ pub struct LoopbackRun {
     pub t0: Instant,
     pub mock: mock_krc::MockResult,
     pub daemon: DaemonSummary,
+    pub injected: Option<InjectedCounts>,
 }
 
 /// Runs the demo end to end and judges every stroke.
 pub fn run(cfg: &DemoConfig, cal: &Calibration) -> std::io::Result<DemoReport> {
     let r = run_loopback(cfg, cal)?;
-    Ok(judge(cal, &r.balls, &r.starts, r.t0, &r.mock, &r.daemon))
+    let mut report = judge(cal, &r.balls, &r.starts, r.t0, &r.mock, &r.daemon);
+    report.tracker_faults = r.injected;
+    Ok(report)
 }
 
 /// The simulated tracker, the daemon threads and the mock KR C4 on
@@ -152,13 +176,30 @@ pub fn run_loopback(cfg: &DemoConfig, cal: &Calibration) -> std::io::Result<Loop
     if let Some(d) = cfg.answer_deadline {
         mcfg.answer_deadline = d;
     }
+    if let Some(n) = cfg.late_limit {
+        mcfg.controller.late_limit = n;
+    }
     let mock = mock_krc::spawn(mcfg)?;
 
     let tracker = UdpSocket::bind("127.0.0.1:0")?;
     tracker.connect(daemon.tracker_addr)?;
     let t0 = runtime::now() + Duration::from_nanos((LEAD_IN * 1e9) as u64);
     let never = AtomicBool::new(false);
-    stream(&tracker, &balls, &starts, cfg.tracker.latency, t0, &never)?;
+    let injected = match &cfg.tracker_faults {
+        None => {
+            stream(&tracker, &balls, &starts, cfg.tracker.latency, t0, &never)?;
+            None
+        }
+        Some(f) => {
+            let clean = plan_datagrams(&balls, &starts, cfg.tracker.latency, t0);
+            let (plan, counts) = inject(&clean, f, cfg.seed);
+            // Another loopback address: not the configured tracker source.
+            let foreign = UdpSocket::bind("127.0.0.2:0")?;
+            foreign.connect(daemon.tracker_addr)?;
+            send_planned(&tracker, Some(&foreign), &plan, &never)?;
+            Some(counts)
+        }
+    };
     // Let the last stroke finish and the bat come home.
     let last_end = starts.last().copied().unwrap_or(0.0) + ends.last().copied().unwrap_or(0.0);
     let until = capture_time(t0, last_end, 0.6);
@@ -182,7 +223,7 @@ pub fn run_loopback(cfg: &DemoConfig, cal: &Calibration) -> std::io::Result<Loop
     }
     let mock = mock.stop()?;
     let daemon = daemon.join()?;
-    Ok(LoopbackRun { balls, starts, t0, mock, daemon })
+    Ok(LoopbackRun { balls, starts, t0, mock, daemon, injected })
 }
 
 /// The last plan of the trajectory whose hit is nearest the true one.
@@ -262,6 +303,11 @@ fn judge(
         late_by_max_ms: summary.telemetry.late_by_max_ms,
         plans_rejected: summary.telemetry.plans_rejected,
         warnings: summary.warnings.iter().map(|w| w.to_string()).collect(),
+        ingest: summary.ingest,
+        tracker_faults: None,
+        poscorr_clamped: mock.poscorr_clamped,
+        robot_limited: mock.robot_limited,
+        stopped_by_monitor: mock.stopped_by_monitor,
         per_ball,
     }
 }

@@ -32,6 +32,15 @@ pub struct DemoArgs {
     /// later than a cycle are then counted in `answers_after_cycle`.
     #[arg(long, hide = true)]
     pub answer_deadline_ms: Option<u64>,
+    /// Late answers before the mock KR C4 stops RSI (default: the context's
+    /// Timeout, as the controller). For soaks that count every late answer.
+    #[arg(long, hide = true)]
+    pub late_limit: Option<u64>,
+    /// Mistreat the tracker stream with every fault of issue 9 (20 % loss,
+    /// 100 ms silences, duplicates, reordering, garbage at 10× the ball
+    /// rate, a foreign ball, teleports, a clock jump): `sim::faults`.
+    #[arg(long)]
+    pub tracker_faults: bool,
 }
 
 pub fn run(a: DemoArgs) -> anyhow::Result<()> {
@@ -54,6 +63,8 @@ pub fn run(a: DemoArgs) -> anyhow::Result<()> {
         tracker: TrackerModel { noise_sigma: a.noise_mm * 1e-3, dropout: a.dropout, ..TrackerModel::default() },
         gap: a.gap,
         answer_deadline: a.answer_deadline_ms.map(crate::time::Duration::from_millis),
+        late_limit: a.late_limit,
+        tracker_faults: a.tracker_faults.then(crate::sim::faults::TrackerFaults::all),
         ..DemoConfig::default()
     };
     if !a.json {
@@ -149,6 +160,36 @@ pub fn table(r: &DemoReport) -> String {
         out,
         "plans taken late: {} (worst {:.1} ms), refused: {}",
         r.plans_late, r.late_by_max_ms, r.plans_rejected
+    );
+    if let Some(f) = &r.tracker_faults {
+        let i = &r.ingest;
+        let _ = writeln!(
+            out,
+            "tracker faults: {} clean, {} lost, {} silenced, {} duplicated, {} reordered, {} garbage, {} foreign, \
+             {} teleported, {} re-clocked; ingest: {} accepted, {} foreign, {} malformed, {} duplicate, \
+             {} out of order, {} restarts, {} clock jumps",
+            f.clean,
+            f.lost,
+            f.silenced,
+            f.duplicated,
+            f.reordered,
+            f.garbage,
+            f.foreign,
+            f.teleported,
+            f.clock_jumped,
+            i.accepted,
+            i.foreign,
+            i.malformed,
+            i.duplicate,
+            i.out_of_order,
+            i.tracker_restarts,
+            i.clock_jumps
+        );
+    }
+    let _ = writeln!(
+        out,
+        "mock KR C4: {} POSCORR clamps, {} limited by the robot, monitor stop: {}",
+        r.poscorr_clamped, r.robot_limited, r.stopped_by_monitor
     );
     for w in &r.warnings {
         let _ = writeln!(out, "warning: {w}");
