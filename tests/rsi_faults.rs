@@ -107,7 +107,22 @@ impl Sensor {
     }
 
     fn mock(&self, cycle_ms: u32, cycles: u64, faults: Faults, first_ipoc: Option<u64>) -> MockResult {
+        self.mock_from(cycle_ms, cycles, faults, first_ipoc, None)
+    }
+
+    /// As `mock`, the robot starting at `start` (mm, degrees) instead of home.
+    fn mock_from(
+        &self,
+        cycle_ms: u32,
+        cycles: u64,
+        faults: Faults,
+        first_ipoc: Option<u64>,
+        start: Option<[f64; 6]>,
+    ) -> MockResult {
         let mut cfg = MockKrcConfig::default_cell().unwrap();
+        if let Some(p) = start {
+            cfg.controller.start = p;
+        }
         cfg.sensor = self.addr;
         cfg.bind = "127.0.0.1:0".parse().unwrap();
         cfg.cycles = Some(cycles);
@@ -189,6 +204,27 @@ fn rsi_stopped_and_restarted_resumes() {
     // Both runs answered on time (under the stretched deadline; a couple
     // of 50 ms hiccups of this shared machine tolerated).
     assert!(first.late + second.late <= 2, "{} / {}", brief(&first), brief(&second));
+}
+
+#[test]
+fn rsi_restarted_with_the_robot_off_home_brings_it_home_within_limits() {
+    // After a crash mid-stroke the controller restarts RSI where the robot
+    // stopped: the session starts from that pose and brings the bat home,
+    // within every limit.
+    let sensor = Sensor::start(4);
+    let home = MockKrcConfig::default_cell().unwrap().controller.start;
+    let mut start = home;
+    start[0] += 60.0;
+    start[2] -= 40.0;
+    let r = sensor.mock_from(4, 300, Faults::default(), None, Some(start));
+    let stats = sensor.stop();
+    assert_eq!(r.cycles, 300);
+    within_limits(&r);
+    assert_eq!(stats.answers, 300, "{stats:?}");
+    let end = r.path.last().unwrap().actual;
+    for i in 0..6 {
+        assert!((end[i] - home[i]).abs() < 0.5, "from {start:?} the bat ended at {end:?}, home {home:?}");
+    }
 }
 
 #[test]
