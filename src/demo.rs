@@ -24,6 +24,7 @@ use crate::calib::Calibration;
 use crate::calib::camera::CameraCalib;
 use crate::eval::stats::Summary;
 use crate::logo::stream::LogoCounters;
+use crate::ingest::IngestCounters;
 use crate::mock_krc::{self, MockKrcConfig};
 use crate::physics::{Vec3, rad_to_rps};
 use crate::plan::StrikePlan;
@@ -31,6 +32,7 @@ use crate::render::{BallColour, Scene, Sequence, SequenceOptions, render_sequenc
 use crate::runtime::daemon::{Daemon, DaemonSummary, LinkState, RuntimeConfig};
 pub use crate::runtime::telemetry::{Latencies, Latency};
 use crate::runtime::{self};
+use crate::sim::faults::{InjectedCounts, TrackerFaults, inject, plan_datagrams, send_planned};
 use crate::sim::stream::{capture_time, stream};
 use crate::sim::{SimBall, TrackerModel, schedule, true_state_at};
 use crate::time::{Duration, Instant};
@@ -63,6 +65,13 @@ pub struct DemoConfig {
     pub live_wait: Duration,
     /// Record the session (MCAP, with the viewer's channels) to this file.
     pub record: Option<PathBuf>,
+    /// The mock's late-answer limit before it stops RSI; `None`: the
+    /// controller's (the context's Timeout). A soak raises it so that a
+    /// long run counts every late answer instead of stopping at the limit.
+    pub late_limit: Option<u64>,
+    /// Tracker-side faults injected into the stream (`sim::faults`); the
+    /// foreign ball comes from 127.0.0.2.
+    pub tracker_faults: Option<TrackerFaults>,
 }
 
 /// After a live client connects, time given it to subscribe.
@@ -80,6 +89,8 @@ impl Default for DemoConfig {
             live: None,
             live_wait: Duration::from_nanos(0),
             record: None,
+            late_limit: None,
+            tracker_faults: None,
         }
     }
 }
@@ -134,6 +145,16 @@ pub struct DemoReport {
     pub logo_spins_fused: u64,
     pub logo_spins_gated: u64,
     pub warnings: Vec<String>,
+    /// The daemon's tracker ingest counters (foreign, malformed, …).
+    pub ingest: IngestCounters,
+    /// What the tracker fault injector did (`None`: a clean stream).
+    pub tracker_faults: Option<InjectedCounts>,
+    /// Corrections the mock KR C4 had to clamp (POSCORR) or slow down to
+    /// the robot's limits, and whether its monitor stopped RSI: all zero
+    /// and false unless the daemon commanded something out of bounds.
+    pub poscorr_clamped: u64,
+    pub robot_limited: u64,
+    pub stopped_by_monitor: bool,
     pub per_ball: Vec<BallVerdict>,
 }
 
@@ -151,12 +172,15 @@ pub struct LoopbackRun {
     pub t0: Instant,
     pub mock: mock_krc::MockResult,
     pub daemon: DaemonSummary,
+    pub injected: Option<InjectedCounts>,
 }
 
 /// Runs the demo end to end and judges every stroke.
 pub fn run(cfg: &DemoConfig, cal: &Calibration) -> std::io::Result<DemoReport> {
     let r = run_loopback(cfg, cal)?;
-    Ok(judge(cal, &r.balls, &r.starts, r.t0, &r.mock, &r.daemon))
+    let mut report = judge(cal, &r.balls, &r.starts, r.t0, &r.mock, &r.daemon);
+    report.tracker_faults = r.injected;
+    Ok(report)
 }
 
 /// The simulated tracker, the daemon threads and the mock KR C4 on
@@ -189,6 +213,9 @@ pub fn run_loopback(cfg: &DemoConfig, cal: &Calibration) -> std::io::Result<Loop
     if let Some(d) = cfg.answer_deadline {
         mcfg.answer_deadline = d;
     }
+    if let Some(n) = cfg.late_limit {
+        mcfg.controller.late_limit = n;
+    }
     let mock = mock_krc::spawn(mcfg)?;
 
     let tracker = UdpSocket::bind("127.0.0.1:0")?;
@@ -220,7 +247,21 @@ pub fn run_loopback(cfg: &DemoConfig, cal: &Calibration) -> std::io::Result<Loop
         _ => None,
     };
     let never = AtomicBool::new(false);
-    stream(&tracker, &balls, &starts, cfg.tracker.latency, t0, &never)?;
+    let injected = match &cfg.tracker_faults {
+        None => {
+            stream(&tracker, &balls, &starts, cfg.tracker.latency, t0, &never)?;
+            None
+        }
+        Some(f) => {
+            let clean = plan_datagrams(&balls, &starts, cfg.tracker.latency, t0);
+            let (plan, counts) = inject(&clean, f, cfg.seed);
+            // Another loopback address: not the configured tracker source.
+            let foreign = UdpSocket::bind("127.0.0.2:0")?;
+            foreign.connect(daemon.tracker_addr)?;
+            send_planned(&tracker, Some(&foreign), &plan, &never)?;
+            Some(counts)
+        }
+    };
     if let Some(c) = camera {
         c.join().map_err(|_| std::io::Error::other("crop stream panicked"))??;
     }
@@ -247,7 +288,7 @@ pub fn run_loopback(cfg: &DemoConfig, cal: &Calibration) -> std::io::Result<Loop
     }
     let mock = mock.stop()?;
     let daemon = daemon.join()?;
-    Ok(LoopbackRun { balls, starts, t0, mock, daemon })
+    Ok(LoopbackRun { balls, starts, t0, mock, daemon, injected })
 }
 
 /// The daemon configuration the demo amounts to (tracker noise and latency).
@@ -380,6 +421,11 @@ fn judge(
         logo_spins_fused: summary.telemetry.logo_spins_fused,
         logo_spins_gated: summary.telemetry.logo_spins_gated,
         warnings: summary.warnings.iter().map(|w| w.to_string()).collect(),
+        ingest: summary.ingest,
+        tracker_faults: None,
+        poscorr_clamped: mock.poscorr_clamped,
+        robot_limited: mock.robot_limited,
+        stopped_by_monitor: mock.stopped_by_monitor,
         per_ball,
     }
 }

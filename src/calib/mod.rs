@@ -139,12 +139,28 @@ impl Calibration {
                 source: std::io::Error::new(std::io::ErrorKind::NotFound, "not a directory"),
             });
         }
-        let (text, path) = read_or_default(dir, "physics.toml", DEFAULT_PHYSICS)?;
-        let physics = parse::<PhysicsFile>(&text, &path)?.physics;
+        let physics = read_or_default(dir, "physics.toml", DEFAULT_PHYSICS)?;
+        let table = read_or_default(dir, "table.toml", DEFAULT_TABLE)?;
+        let strike = read_or_default(dir, "strike.toml", DEFAULT_STRIKE)?;
+        let robot = read_or_default(dir, "robot.toml", DEFAULT_ROBOT)?;
+        Self::from_texts((&physics.0, &physics.1), (&table.0, &table.1), (&strike.0, &strike.1), (&robot.0, &robot.1))
+    }
+
+    /// Parses and validates the four files' texts (each with the path its
+    /// errors name): no file system, never panics (fuzzed:
+    /// `fuzz/fuzz_targets/calib.rs`).
+    pub fn from_texts(
+        physics: (&str, &Path),
+        table: (&str, &Path),
+        strike: (&str, &Path),
+        robot: (&str, &Path),
+    ) -> Result<Self, CalibError> {
+        let (text, path) = (physics.0, physics.1.to_owned());
+        let physics = parse::<PhysicsFile>(text, &path)?.physics;
         physics.validate().map_err(|source| CalibError::Invalid { path: path.clone(), source })?;
 
-        let (text, path) = read_or_default(dir, "table.toml", DEFAULT_TABLE)?;
-        let table = parse::<TableFile>(&text, &path)?.table;
+        let (text, path) = (table.0, table.1.to_owned());
+        let table = parse::<TableFile>(text, &path)?.table;
         for (key, value) in [
             ("table.length", table.length),
             ("table.width", table.width),
@@ -156,8 +172,8 @@ impl Calibration {
             }
         }
 
-        let (text, path) = read_or_default(dir, "strike.toml", DEFAULT_STRIKE)?;
-        let strike = parse::<StrikeFile>(&text, &path)?.strike;
+        let (text, path) = (strike.0, strike.1.to_owned());
+        let strike = parse::<StrikeFile>(text, &path)?.strike;
         let s = &strike;
         let ordered = |r: [f64; 2]| r[0].is_finite() && r[1].is_finite() && r[0] < r[1];
         let checks = [
@@ -179,8 +195,8 @@ impl Calibration {
                 return Err(CalibError::OutOfRange { path, key, value });
             }
         }
-        let (text, path) = read_or_default(dir, "robot.toml", DEFAULT_ROBOT)?;
-        let robot = parse::<RobotFile>(&text, &path)?;
+        let (text, path) = (robot.0, robot.1.to_owned());
+        let robot = parse::<RobotFile>(text, &path)?;
         robot.validate().map_err(|b| CalibError::OutOfRange { path: path.clone(), key: b.key, value: b.value })?;
         // The hitting window's corners must lie inside the robot's workspace
         // (the base may be yawed, so check all four).

@@ -51,6 +51,15 @@ pub struct DemoArgs {
     /// Record the session to this MCAP file (the viewer's channels included).
     #[arg(long, value_name = "FILE")]
     pub record: Option<std::path::PathBuf>,
+    /// Late answers before the mock KR C4 stops RSI (default: the context's
+    /// Timeout, as the controller). For soaks that count every late answer.
+    #[arg(long, hide = true)]
+    pub late_limit: Option<u64>,
+    /// Mistreat the tracker stream with every fault of issue 9 (20 % loss,
+    /// 100 ms silences, duplicates, reordering, garbage at 10× the ball
+    /// rate, a foreign ball, teleports, a clock jump): `sim::faults`.
+    #[arg(long)]
+    pub tracker_faults: bool,
 }
 
 pub fn run(a: DemoArgs) -> anyhow::Result<()> {
@@ -94,6 +103,8 @@ pub fn run(a: DemoArgs) -> anyhow::Result<()> {
         live: a.live,
         live_wait: crate::time::Duration::from_nanos((a.live_wait.max(0.0) * 1e9) as u64),
         record: a.record.clone(),
+        late_limit: a.late_limit,
+        tracker_faults: a.tracker_faults.then(crate::sim::faults::TrackerFaults::all),
         ..DemoConfig::default()
     };
     if !a.json {
@@ -200,6 +211,36 @@ pub fn table(r: &DemoReport) -> String {
             c.crops, c.sequences, c.fitted, r.logo_spins_fused, r.logo_spins_gated
         );
     }
+    if let Some(f) = &r.tracker_faults {
+        let i = &r.ingest;
+        let _ = writeln!(
+            out,
+            "tracker faults: {} clean, {} lost, {} silenced, {} duplicated, {} reordered, {} garbage, {} foreign, \
+             {} teleported, {} re-clocked; ingest: {} accepted, {} foreign, {} malformed, {} duplicate, \
+             {} out of order, {} restarts, {} clock jumps",
+            f.clean,
+            f.lost,
+            f.silenced,
+            f.duplicated,
+            f.reordered,
+            f.garbage,
+            f.foreign,
+            f.teleported,
+            f.clock_jumped,
+            i.accepted,
+            i.foreign,
+            i.malformed,
+            i.duplicate,
+            i.out_of_order,
+            i.tracker_restarts,
+            i.clock_jumps
+        );
+    }
+    let _ = writeln!(
+        out,
+        "mock KR C4: {} POSCORR clamps, {} limited by the robot, monitor stop: {}",
+        r.poscorr_clamped, r.robot_limited, r.stopped_by_monitor
+    );
     for w in &r.warnings {
         let _ = writeln!(out, "warning: {w}");
     }

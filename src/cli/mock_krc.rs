@@ -50,6 +50,9 @@ pub struct MockKrcArgs {
     /// Duplicate this fraction of answers.
     #[arg(long, default_value_t = 0.0)]
     pub duplicate: f64,
+    /// Send this fraction of requests after the next one (reordered).
+    #[arg(long, default_value_t = 0.0)]
+    pub reorder: f64,
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
     /// Write the TCP path here (CSV).
@@ -74,7 +77,8 @@ pub fn run(a: MockKrcArgs) -> anyhow::Result<()> {
     if a.cycle_ms != 4 && a.cycle_ms != 12 {
         return Err(BadInput("--cycle-ms must be 4 or 12".into()).into());
     }
-    for (name, p) in [("--drop", a.drop), ("--delay", a.delay), ("--duplicate", a.duplicate)] {
+    for (name, p) in [("--drop", a.drop), ("--delay", a.delay), ("--duplicate", a.duplicate), ("--reorder", a.reorder)]
+    {
         if !(0.0..=1.0).contains(&p) {
             return Err(BadInput(format!("{name} must be within 0..1")).into());
         }
@@ -91,8 +95,13 @@ pub fn run(a: MockKrcArgs) -> anyhow::Result<()> {
     }
     cfg.cycles = a.cycles;
     cfg.seed = a.seed;
-    cfg.faults =
-        Faults { drop: a.drop, delay: a.delay, delay_by: Duration::from_millis(a.delay_ms), duplicate: a.duplicate };
+    cfg.faults = Faults {
+        drop: a.drop,
+        delay: a.delay,
+        delay_by: Duration::from_millis(a.delay_ms),
+        duplicate: a.duplicate,
+        reorder: a.reorder,
+    };
     eprintln!(
         "mock-krc: sending <Rob> every {} ms to {} ({:?}, SENTYPE {})",
         a.cycle_ms, cfg.sensor, a.mode, eth.sentype

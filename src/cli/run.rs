@@ -104,7 +104,14 @@ pub fn run(a: RunArgs) -> anyhow::Result<()> {
         let dir = &cfg.recording.dir;
         std::fs::create_dir_all(dir).map_err(|e| BadInput(format!("recording.dir {}: {e}", dir.display())))?;
         let stamp = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_secs());
-        let path = dir.join(format!("topspin-{stamp}.mcap"));
+        // A restart within the same second (systemd after a crash) must not
+        // overwrite the crashed run's recording.
+        let path = (0..)
+            .map(|k| {
+                dir.join(if k == 0 { format!("topspin-{stamp}.mcap") } else { format!("topspin-{stamp}-{k}.mcap") })
+            })
+            .find(|p| !p.exists())
+            .expect("an unused name");
         let files = calib_files(cfg.calib.dir()).map_err(|e| BadInput(e.to_string()))?;
         let rec = Recorder::create(&path, &cfg, &files).map_err(|e| BadInput(e.to_string()))?;
         tracing::info!(target: "topspin", "recording to {}", path.display());

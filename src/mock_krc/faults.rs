@@ -1,6 +1,6 @@
 //! The link between the mock controller and the sensor, and a seeded fault
-//! injector around it (drop, delay, duplicate answers) — smoltcp's
-//! `FaultInjector` pattern: the controller core has no fault `if`s.
+//! injector around it (drop, delay, duplicate answers; reorder requests) —
+//! smoltcp's `FaultInjector` pattern: the controller core has no fault `if`s.
 
 use std::collections::VecDeque;
 use std::io;
@@ -102,17 +102,20 @@ pub struct Faults {
     pub delay: f64,
     pub delay_by: Duration,
     pub duplicate: f64,
+    /// A request held back and sent after the next one (the sensor sees
+    /// the IPOCs out of order; the held cycle goes unanswered in time).
+    pub reorder: f64,
 }
 
 impl Default for Faults {
     fn default() -> Self {
-        Faults { drop: 0.0, delay: 0.0, delay_by: Duration::from_millis(6), duplicate: 0.0 }
+        Faults { drop: 0.0, delay: 0.0, delay_by: Duration::from_millis(6), duplicate: 0.0, reorder: 0.0 }
     }
 }
 
 impl Faults {
     pub fn any(&self) -> bool {
-        self.drop > 0.0 || self.delay > 0.0 || self.duplicate > 0.0
+        self.drop > 0.0 || self.delay > 0.0 || self.duplicate > 0.0 || self.reorder > 0.0
     }
 }
 
@@ -123,9 +126,11 @@ pub struct FaultInjector<L> {
     faults: Faults,
     rng: ChaCha8Rng,
     held: VecDeque<(Instant, Vec<u8>)>,
+    held_request: Option<Vec<u8>>,
     pub dropped: u64,
     pub delayed: u64,
     pub duplicated: u64,
+    pub reordered: u64,
 }
 
 impl<L: Link> FaultInjector<L> {
@@ -135,9 +140,11 @@ impl<L: Link> FaultInjector<L> {
             faults,
             rng: ChaCha8Rng::seed_from_u64(seed),
             held: VecDeque::new(),
+            held_request: None,
             dropped: 0,
             delayed: 0,
             duplicated: 0,
+            reordered: 0,
         }
     }
 
@@ -152,6 +159,16 @@ impl<L: Link> FaultInjector<L> {
 
 impl<L: Link> Link for FaultInjector<L> {
     fn send(&mut self, bytes: &[u8]) -> io::Result<()> {
+        if let Some(older) = self.held_request.take() {
+            // The held request goes out after this newer one.
+            self.inner.send(bytes)?;
+            return self.inner.send(&older);
+        }
+        if self.faults.reorder > 0.0 && self.rng.random::<f64>() < self.faults.reorder {
+            self.reordered += 1;
+            self.held_request = Some(bytes.to_vec());
+            return Ok(());
+        }
         self.inner.send(bytes)
     }
 

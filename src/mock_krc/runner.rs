@@ -106,6 +106,8 @@ pub struct MockResult {
     pub dropped: u64,
     pub delayed: u64,
     pub duplicated: u64,
+    /// Requests sent after the next one (`Faults::reorder`).
+    pub reordered: u64,
     /// Latest answer arrival after its request's scheduled time.
     pub max_answer_delay: Duration,
     /// Accepted answers that came later than one cycle (only possible with
@@ -188,6 +190,7 @@ fn run_on(link: UdpLink, cfg: &MockKrcConfig, stop: &AtomicBool) -> io::Result<M
         r.dropped = f.dropped;
         r.delayed = f.delayed;
         r.duplicated = f.duplicated;
+        r.reordered = f.reordered;
         Ok(r)
     } else {
         let mut l = link;

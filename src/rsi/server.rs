@@ -84,7 +84,12 @@ pub struct RsiServer {
     allowed: Option<std::net::IpAddr>,
     /// Requests from other addresses, ignored.
     foreign: u64,
-    rx: [u8; MAX_REQUEST_LEN],
+    /// Requests longer than [`MAX_REQUEST_LEN`], ignored (not truncated
+    /// into something that might parse).
+    oversized: u64,
+    /// One byte more than a request may hold: a datagram that fills it
+    /// was too long.
+    rx: [u8; MAX_REQUEST_LEN + 1],
     tx: [u8; MAX_ANSWER_LEN],
 }
 
@@ -102,7 +107,8 @@ impl RsiServer {
             wait,
             allowed: None,
             foreign: 0,
-            rx: [0; MAX_REQUEST_LEN],
+            oversized: 0,
+            rx: [0; MAX_REQUEST_LEN + 1],
             tx: [0; MAX_ANSWER_LEN],
         })
     }
@@ -116,6 +122,11 @@ impl RsiServer {
     /// Requests ignored because they came from another address.
     pub fn foreign(&self) -> u64 {
         self.foreign
+    }
+
+    /// Requests ignored because they were longer than [`MAX_REQUEST_LEN`].
+    pub fn oversized(&self) -> u64 {
+        self.oversized
     }
 
     pub fn local_addr(&self) -> io::Result<SocketAddr> {
@@ -150,6 +161,10 @@ impl RsiServer {
             let now = runtime::now();
             if self.allowed.is_some_and(|ip| ip != from.ip()) {
                 self.foreign += 1;
+                continue;
+            }
+            if n > MAX_REQUEST_LEN {
+                self.oversized += 1;
                 continue;
             }
             if let Some(p) = plans.take() {

@@ -10,6 +10,7 @@
 //! number of balls or the tracker options. No clock, no I/O: the command
 //! line writes files and paces the live stream.
 
+pub mod faults;
 pub mod launcher;
 pub mod stream;
 pub mod tracker;
