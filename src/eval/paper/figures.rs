@@ -333,9 +333,7 @@ pub fn latency(run: &LatencyRun) -> anyhow::Result<String> {
             for (us, n) in data {
                 *binned.entry(us / step * step).or_insert(0u64) += n;
             }
-            c.draw_series(
-                Histogram::vertical(&c).style(BLUE_.filled()).margin(0).data(binned.into_iter().map(|(x, n)| (x, n))),
-            )?;
+            c.draw_series(Histogram::vertical(&c).style(BLUE_.filled()).margin(0).data(binned))?;
         }
         Ok(())
     })
