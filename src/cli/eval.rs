@@ -23,6 +23,8 @@ pub enum EvalCommand {
     Stream(EvalStreamArgs),
     /// Real launcher trajectories: bounce and look-ahead error with and without the fitted spin.
     Real(super::eval_real::EvalRealArgs),
+    /// The paper's tables and figures (Tables III, IV, logo metrics, real data) into a folder.
+    Paper(super::eval_paper::EvalPaperArgs),
 }
 
 /// Options shared by the simulated evaluations.
@@ -69,6 +71,7 @@ pub fn run(cmd: EvalCommand) -> anyhow::Result<()> {
         EvalCommand::Fit(a) => run_fit(a),
         EvalCommand::Stream(a) => run_stream(a),
         EvalCommand::Real(a) => super::eval_real::run_real(a),
+        EvalCommand::Paper(a) => super::eval_paper::run_paper(a),
     }
 }
 

@@ -7,6 +7,7 @@ use clap::{Parser, Subcommand};
 pub mod bench;
 pub mod demo;
 pub mod eval;
+pub mod eval_paper;
 pub mod eval_real;
 pub mod fit;
 pub mod logo;

@@ -4,6 +4,7 @@
 //! tables (`topspin eval ...`).
 
 pub mod fit;
+pub mod paper;
 pub mod stats;
 pub mod stream;
 

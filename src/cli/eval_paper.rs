@@ -1,0 +1,235 @@
+//! `topspin eval paper --out DIR`: the paper's tables (III, IV, logo
+//! metrics, real data) and figures in one run: `DIR/tables.md`,
+//! `DIR/results.json` and `DIR/*.svg`, with a progress bar on stderr.
+//!
+//! The CNN and the fused estimate plug in through
+//! [`crate::eval::paper::Extensions`]: give `run_tables` a
+//! `&mut dyn CropPredictor` / `&mut dyn SpinFusion` and their rows fill.
+
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use clap::Args;
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+
+use super::BadInput;
+use super::fit::{PhysicsChoice, load_calibration};
+use crate::calib::Calibration;
+use crate::calib::camera::CameraCalib;
+use crate::data::eval::prepare;
+use crate::data::frame::MPI_LAB_TO_TABLE;
+use crate::data::mpi::{load, locate};
+use crate::demo::{DemoConfig, run_loopback};
+use crate::eval::paper::report::{Histogram, LatencyRun, PaperReport, markdown};
+use crate::eval::paper::{Extensions, PaperConfig, Progress, figures, run_tables};
+
+#[derive(Debug, Args)]
+pub struct EvalPaperArgs {
+    /// Folder for tables.md, results.json and the figures (created).
+    #[arg(long, value_name = "DIR")]
+    pub out: PathBuf,
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Table III: balls per launcher setting.
+    #[arg(long, default_value_t = 10)]
+    pub bounce_balls: usize,
+    /// Table IV: filmed flights per launcher setting.
+    #[arg(long, default_value_t = 50)]
+    pub flights: usize,
+    /// Crops per filmed flight (380 Hz).
+    #[arg(long, default_value_t = 20)]
+    pub frames: usize,
+    /// Tracker noise per axis, mm.
+    #[arg(long, default_value_t = 2.0)]
+    pub noise_mm: f64,
+    /// Seconds of `topspin bench latency` for the latency histograms (0: none).
+    #[arg(long, default_value_t = 5.0)]
+    pub latency_s: f64,
+    /// The MPI launcher folder (default: $TOPSPIN_MPI_DATA or ../shared/data/mpi-launcher).
+    #[arg(long, value_name = "DIR")]
+    pub data: Option<PathBuf>,
+    /// Physics of the simulation and the fits.
+    #[arg(long, value_enum, default_value_t = PhysicsChoice::Calibrated)]
+    pub physics: PhysicsChoice,
+    /// Another calibration folder.
+    #[arg(long, value_name = "DIR")]
+    pub calib: Option<PathBuf>,
+    /// No progress bar.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+/// An indicatif bar per stage.
+struct Bar {
+    bar: ProgressBar,
+}
+
+impl Bar {
+    fn new(quiet: bool) -> Self {
+        let bar = ProgressBar::with_draw_target(
+            Some(0),
+            if quiet { ProgressDrawTarget::hidden() } else { ProgressDrawTarget::stderr() },
+        );
+        bar.set_style(
+            ProgressStyle::with_template("{msg:45} [{bar:30}] {pos}/{len} {elapsed_precise} eta {eta}")
+                .expect("valid template")
+                .progress_chars("=> "),
+        );
+        bar.enable_steady_tick(Duration::from_millis(500));
+        Bar { bar }
+    }
+}
+
+impl Progress for Bar {
+    fn stage(&self, name: &str, total: u64) {
+        self.bar.set_message(name.to_owned());
+        self.bar.set_length(total);
+        self.bar.set_position(0);
+        self.bar.reset_eta();
+    }
+    fn inc(&self, n: u64) {
+        self.bar.inc(n);
+    }
+}
+
+fn load_average() -> String {
+    std::fs::read_to_string("/proc/loadavg")
+        .ok()
+        .and_then(|s| s.split_whitespace().next().map(str::to_owned))
+        .unwrap_or_else(|| "?".into())
+}
+
+/// A short `bench latency` run: the daemon threads, the mock KR C4 and
+/// the simulated tracker on loopback.
+pub fn latency_run(seconds: f64, cal: &Calibration) -> anyhow::Result<LatencyRun> {
+    let gap = 1.2;
+    let cfg = DemoConfig { balls: (seconds / gap).ceil().max(1.0) as usize, gap, ..DemoConfig::default() };
+    let r = run_loopback(&cfg, cal)?;
+    let t = &r.daemon.telemetry;
+    let hist = |name: &str, h: &hdrhistogram::Histogram<u64>| Histogram {
+        name: name.to_owned(),
+        buckets: h.iter_recorded().map(|v| (v.value_iterated_to(), v.count_at_value())).collect(),
+        p50: h.value_at_quantile(0.5),
+        p99: h.value_at_quantile(0.99),
+        p999: h.value_at_quantile(0.999),
+        max: h.max(),
+        n: h.len(),
+    };
+    Ok(LatencyRun {
+        seconds,
+        rsi_cycles: r.mock.cycles,
+        late_answers: r.mock.late,
+        histograms: vec![hist("RSI answer", &t.rsi_answer_us), hist("observation → plan", &t.obs_to_plan_us)],
+    })
+}
+
+fn data_dir(explicit: Option<&Path>) -> Option<PathBuf> {
+    if let Some(d) = explicit {
+        return Some(d.to_owned());
+    }
+    let roots = [std::env::current_dir().ok(), Some(PathBuf::from(env!("CARGO_MANIFEST_DIR")))];
+    roots.iter().flatten().find_map(|r| locate(r))
+}
+
+pub fn run_paper(a: EvalPaperArgs) -> anyhow::Result<()> {
+    let started = Instant::now();
+    if !(a.noise_mm.is_finite() && a.noise_mm > 0.0) {
+        return Err(BadInput(format!("--noise-mm {} must be positive", a.noise_mm)).into());
+    }
+    if a.flights < 2 || a.bounce_balls < 1 || a.frames < crate::logo::eval::MIN_FRAMES {
+        return Err(BadInput(format!(
+            "need --flights ≥ 2, --bounce-balls ≥ 1 and --frames ≥ {}",
+            crate::logo::eval::MIN_FRAMES
+        ))
+        .into());
+    }
+    let cal = load_calibration(a.calib.as_deref(), a.physics)?;
+    let cam = CameraCalib::load(a.calib.as_deref()).map_err(|e| BadInput(e.to_string()))?;
+    std::fs::create_dir_all(&a.out).map_err(|e| BadInput(format!("{}: {e}", a.out.display())))?;
+    let cfg = PaperConfig {
+        seed: a.seed,
+        bounce_balls: a.bounce_balls,
+        flights: a.flights,
+        frames: a.frames,
+        noise_mm: a.noise_mm,
+        ..PaperConfig::default()
+    };
+    let (real, real_note) = match data_dir(a.data.as_deref()) {
+        Some(dir) => match load(&dir) {
+            Ok(t) => (Some(prepare(&t, &MPI_LAB_TO_TABLE)), None),
+            Err(e) => return Err(BadInput(format!("{}: {e}", dir.display())).into()),
+        },
+        None => (None, Some("MPI launcher data not found (`--data DIR` or `$TOPSPIN_MPI_DATA`): skipped.".to_owned())),
+    };
+    let load_before = load_average();
+    let bar = Bar::new(a.quiet);
+    let epoch = Instant::now();
+    let clock = move || epoch.elapsed().as_secs_f64();
+    // The CNN and the fusion plug in here (`Extensions { cnn: Some(..), fusion: Some(..) }`).
+    let mut tables = run_tables(&cal, &cam, &cfg, real.as_deref(), Extensions::default(), &bar, &clock);
+    let latency = if a.latency_s > 0.0 {
+        bar.stage(&format!("latency bench ({} s)", a.latency_s), 1);
+        let t0 = Instant::now();
+        let l = latency_run(a.latency_s.max(2.0), &Calibration::default_cell())?;
+        bar.inc(1);
+        tables.stage_seconds.push(("latency bench".into(), t0.elapsed().as_secs_f64()));
+        Some(l)
+    } else {
+        None
+    };
+    bar.stage("figures", 1);
+    let t0 = Instant::now();
+    let figs = figures(&cal, &cam, &cfg, &tables.set, latency.as_ref())?;
+    for (name, svg) in &figs {
+        std::fs::write(a.out.join(name), svg)?;
+    }
+    tables.stage_seconds.push(("figures".into(), t0.elapsed().as_secs_f64()));
+    bar.inc(1);
+    bar.bar.finish_and_clear();
+    let cores = std::thread::available_parallelism().map_or(0, |n| n.get());
+    let machine = format!(
+        "{cores} cores, {} rayon threads, load average {load_before} at the start and {} at the end (a shared machine)",
+        rayon::current_num_threads(),
+        load_average()
+    );
+    let mut command = format!(
+        "topspin eval paper --out {} --seed {} --bounce-balls {} --flights {} --frames {} --noise-mm {}",
+        a.out.display(),
+        a.seed,
+        a.bounce_balls,
+        a.flights,
+        a.frames,
+        a.noise_mm
+    );
+    if a.latency_s != 5.0 {
+        command += &format!(" --latency-s {}", a.latency_s);
+    }
+    let report = PaperReport {
+        command,
+        config: cfg,
+        physics: match a.physics {
+            PhysicsChoice::Calibrated => "calibrated (calib/physics.toml)".into(),
+            PhysicsChoice::Paper => "the paper's".into(),
+        },
+        bounce: tables.bounce,
+        classes: tables.classes,
+        logo: tables.logo,
+        tried: tables.set.tried,
+        cnn: tables.set.cnn_name.clone(),
+        fusion: tables.set.fusion_name.clone(),
+        flights: tables.set.flights,
+        real: tables.real,
+        real_note,
+        latency,
+        figures: figs.into_iter().map(|f| f.0).collect(),
+        stage_seconds: tables.stage_seconds,
+        wall_seconds: started.elapsed().as_secs_f64(),
+        machine,
+    };
+    let md = markdown(&report);
+    std::fs::write(a.out.join("tables.md"), &md)?;
+    std::fs::write(a.out.join("results.json"), serde_json::to_string_pretty(&report)?)?;
+    print!("{md}");
+    eprintln!("wrote {}/tables.md, results.json and {} figures", a.out.display(), report.figures.len());
+    Ok(())
+}
