@@ -309,7 +309,7 @@ impl Default for DaemonConfig {
                 enabled: false,
                 crops_bind: SocketAddr::new(lo, 41001),
                 crops_source: lo,
-                method: LogoMethodConfig::Cnn,
+                method: LogoMethodConfig::Background,
                 model: PathBuf::new(),
                 backend: crate::logo::cnn::Backend::Auto,
                 core: Core(None),
