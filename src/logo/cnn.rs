@@ -177,7 +177,8 @@ impl LogoCnn {
             .with_optimization_level(GraphOptimizationLevel::Level3)
             .map_err(|e| bad(e.into()))?;
         if engine.backend == Backend::OnnxRuntime {
-            builder = builder.with_intra_threads(1).and_then(|b| b.with_inter_threads(1)).map_err(|e| bad(e.into()))?;
+            builder = builder.with_intra_threads(1).map_err(|e| bad(e.into()))?;
+            builder = builder.with_inter_threads(1).map_err(|e| bad(e.into()))?;
         }
         let session = builder.commit_from_file(model).map_err(bad)?;
         let names: Vec<&str> = session.outputs().iter().map(|o| o.name()).collect();
@@ -224,7 +225,7 @@ impl LogoCnn {
     /// [0, 1], [`INPUT_LEN`] per crop, up to [`MAX_BATCH`] crops).
     pub fn infer_floats(&mut self, x: &[f32], out: &mut [CnnOutput]) -> Result<(), CnnError> {
         let n = x.len() / INPUT_LEN;
-        if x.len() % INPUT_LEN != 0 || n == 0 || n > MAX_BATCH || out.len() < n {
+        if !x.len().is_multiple_of(INPUT_LEN) || n == 0 || n > MAX_BATCH || out.len() < n {
             return Err(CnnError::Run(format!("{} floats is not 1..={MAX_BATCH} crops", x.len())));
         }
         self.input[..x.len()].copy_from_slice(x);

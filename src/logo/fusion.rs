@@ -104,7 +104,7 @@ pub fn fuse(trajectory: &SpinEstimate, logo: &SpinEstimate) -> Fused {
     let d = logo.spin - trajectory.spin;
     let s = trajectory.cov + logo.cov;
     let chi2 = s.try_inverse().map(|si| (d.transpose() * si * d)[0]).unwrap_or(f64::INFINITY);
-    if !(chi2 <= GATE_CHI2) {
+    if chi2.is_nan() || chi2 > GATE_CHI2 {
         return Fused::TrajectoryOnly(*trajectory, chi2);
     }
     let (Some(it), Some(il)) = (trajectory.cov.try_inverse(), logo.cov.try_inverse()) else {

@@ -19,8 +19,8 @@ use std::thread::JoinHandle;
 
 use super::rt::{self, RtWarning};
 use super::telemetry::{
-    self, DatagramRecord, LOGO_CROP_SIDE, LOGO_RING, LogoRecord, RECORDED_DATAGRAM, RECORDED_RSI, RSI_BYTES_RING, RsiRecord,
-    TELEMETRY_RING, Telemetry, TelemetryInputs, TelemetrySink, TelemetrySummary, TelemetryTx,
+    self, DatagramRecord, LOGO_CROP_SIDE, LOGO_RING, LogoRecord, RECORDED_DATAGRAM, RECORDED_RSI, RSI_BYTES_RING,
+    RsiRecord, TELEMETRY_RING, Telemetry, TelemetryInputs, TelemetrySink, TelemetrySummary, TelemetryTx,
 };
 use crate::calib::Calibration;
 use crate::calib::camera::CameraCalib;
