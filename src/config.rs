@@ -201,6 +201,7 @@ pub struct RecordingConfig {
 
 /// How the logo thread finds the logo.
 #[derive(Copy, Clone, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "snake_case")]
 pub enum LogoMethodConfig {
     /// The network of `logo.model` (paper §III).
     Cnn,
