@@ -20,8 +20,7 @@ use crate::calib::camera::CameraCalib;
 use crate::eval::stats::Summary;
 use crate::logo::cnn::{self, CnnOutput, LogoCnn, geodesic_deg, swing_to};
 use crate::logo::compare::{self, CompareBall, CompareOptions, CompareRow, SOURCES};
-use crate::logo::rotation::{LogoSample, RotationFitConfig, fit_rotation};
-use crate::logo::view::BallView;
+use crate::logo::rotation::RotationFitConfig;
 use crate::physics::{Vec3, rad_to_rps};
 use crate::render::BallColour;
 use crate::sim::Setting;
@@ -79,7 +78,7 @@ fn median_ms(mut xs: Vec<f64>) -> f64 {
 pub fn run_cnn_eval(dir: &Path, net: &mut LogoCnn, as_json: bool) -> anyhow::Result<()> {
     let data = read_labels(dir)?;
     let crops: Vec<&[u8]> = data.iter().map(|d| d.rgb.as_slice()).collect();
-    let mut out = vec![CnnOutput { visibility: 0.0, orientation: nalgebra::UnitQuaternion::identity() }; crops.len()];
+    let mut out = vec![CnnOutput::default(); crops.len()];
     net.infer(&crops, &mut out).map_err(|e| bad(e.to_string()))?;
     let mut right = 0usize;
     let (mut geo, mut vec) = (Vec::new(), Vec::new());
@@ -219,26 +218,12 @@ pub fn run_folder(
     net: &mut LogoCnn,
     as_json: bool,
 ) -> anyhow::Result<()> {
-    let crops: Vec<&[u8]> = frames.iter().map(|f| f.rgb.as_slice()).collect();
-    if let Some(i) = crops.iter().position(|c| c.len() != cnn::INPUT_SIZE * cnn::INPUT_SIZE * 3) {
+    if let Some(i) = frames.iter().position(|f| f.rgb.len() != cnn::INPUT_SIZE * cnn::INPUT_SIZE * 3) {
         return Err(bad(format!("{}: frame {i} is not a 60 × 60 crop (the CNN's input)", folder.display())));
     }
-    let mut out = vec![CnnOutput { visibility: 0.0, orientation: nalgebra::UnitQuaternion::identity() }; crops.len()];
-    net.infer(&crops, &mut out).map_err(|e| bad(e.to_string()))?;
-    let samples: Vec<LogoSample> = frames
-        .iter()
-        .zip(&out)
-        .map(|(f, o)| {
-            let c = f.circle;
-            let pos = BallView::new(cam, c.u, c.v, c.radius)
-                .and_then(|v| o.seen(cnn::VISIBLE_THRESHOLD).map(|p| v.to_camera(&p)));
-            LogoSample::new(f.t, pos)
-        })
-        .collect();
-    let seen = samples.iter().filter(|s| s.pos.is_some()).count();
-    let fit = fit_rotation(&samples, fit_cfg)
-        .map_err(|e| bad(format!("{}: {e}", folder.display())))?
-        .rotated(&cam.table_from_camera);
+    let crops: Vec<_> = frames.iter().map(|f| (f.t, f.circle, f.rgb.as_slice())).collect();
+    let (seen, fit) = cnn::fit_crops(net, cam, &crops, fit_cfg).map_err(|e| bad(e.to_string()))?;
+    let fit = fit.map_err(|e| bad(format!("{}: {e}", folder.display())))?;
     let w = fit.spin;
     if as_json {
         let v = json!({

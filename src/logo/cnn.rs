@@ -27,6 +27,10 @@ use ort::session::Session;
 use ort::session::builder::GraphOptimizationLevel;
 use ort::value::TensorRef;
 
+use crate::calib::camera::CameraCalib;
+use crate::logo::ball::Circle;
+use crate::logo::rotation::{LogoSample, RotationFit, RotationFitConfig, RotationFitError, fit_rotation};
+use crate::logo::view::BallView;
 use crate::physics::Vec3;
 
 /// Side of the network's input, px (the crops TTI1 carries).
@@ -135,7 +139,23 @@ pub struct CnnOutput {
     pub orientation: UnitQuaternion<f64>,
 }
 
+impl Default for CnnOutput {
+    /// "No logo seen" (what a failed batch counts as).
+    fn default() -> Self {
+        CnnOutput { visibility: 0.0, orientation: UnitQuaternion::identity() }
+    }
+}
+
 impl CnnOutput {
+    /// The logo sample of a crop of capture time `t` (s) whose ball the
+    /// camera side measured as `circle`: the logo's centre in the camera
+    /// frame when the network sees it.
+    pub fn sample(&self, cam: &CameraCalib, circle: Circle, t: f64) -> LogoSample {
+        let pos = BallView::new(cam, circle.u, circle.v, circle.radius)
+            .and_then(|v| self.seen(VISIBLE_THRESHOLD).map(|p| v.to_camera(&p)));
+        LogoSample::new(t, pos)
+    }
+
     /// The logo's centre on the unit sphere, view frame.
     pub fn logo_view(&self) -> Vec3 {
         self.orientation * Vec3::z()
@@ -268,6 +288,23 @@ impl LogoCnn {
         }
         Ok(())
     }
+}
+
+/// The CNN's rotation fit over one ball's crops (time, measured circle,
+/// 60 × 60 RGB8 pixels), in the table frame; with the count of crops in
+/// which the network saw the logo.
+pub fn fit_crops(
+    net: &mut LogoCnn,
+    cam: &CameraCalib,
+    crops: &[(f64, Circle, &[u8])],
+    cfg: &RotationFitConfig,
+) -> Result<(usize, Result<RotationFit, RotationFitError>), CnnError> {
+    let pixels: Vec<&[u8]> = crops.iter().map(|c| c.2).collect();
+    let mut out = vec![CnnOutput::default(); crops.len()];
+    net.infer(&pixels, &mut out)?;
+    let samples: Vec<LogoSample> = crops.iter().zip(&out).map(|(c, o)| o.sample(cam, c.1, c.0)).collect();
+    let seen = samples.iter().filter(|s| s.pos.is_some()).count();
+    Ok((seen, fit_rotation(&samples, cfg).map(|f| f.rotated(&cam.table_from_camera))))
 }
 
 /// The committed compact model, relative to the repository root.

@@ -14,15 +14,15 @@ use serde::Serialize;
 
 use crate::calib::Calibration;
 use crate::calib::camera::CameraCalib;
+use crate::eval::fit::{Window, windowed};
 use crate::eval::stats::Summary;
-use crate::fit::{FitConfig, Method as FitMethod, Sample, fit_trajectory};
-use crate::logo::cnn::{self, CnnOutput, LogoCnn};
-use crate::logo::detect::{CropImage, DetectorConfig};
+use crate::fit::{FitConfig, Method as FitMethod, fit_trajectory};
+use crate::logo::cnn::{self, LogoCnn};
+use crate::logo::detect::DetectorConfig;
 use crate::logo::eval::MIN_FRAMES;
 use crate::logo::fusion::{Fused, SpinEstimate, fuse};
 use crate::logo::pipeline::{CropInput, LogoMethod, process_sequence};
-use crate::logo::rotation::{LogoSample, RotationFit, RotationFitConfig, fit_rotation};
-use crate::logo::view::BallView;
+use crate::logo::rotation::{RotationFit, RotationFitConfig};
 use crate::physics::{Vec3, rad_to_rps};
 use crate::render::{BallColour, Scene, Sequence, SequenceOptions, render_sequence};
 use crate::sim::{Setting, SimBall, TrackerModel, simulate_ball};
@@ -78,8 +78,7 @@ fn film(cal: &Calibration, scene: &Scene, opts: &CompareOptions, k: usize, setti
 }
 
 fn trajectory_estimate(cal: &Calibration, b: &SimBall, noise: f64) -> Option<SpinEstimate> {
-    let end = b.truth.bounce.as_ref().map_or(f64::INFINITY, |x| x.t);
-    let samples: Vec<Sample> = b.observations.iter().filter(|o| o.t < end).map(|o| Sample::new(o.t, o.pos)).collect();
+    let samples = windowed(b, Window::PreBounce);
     let cfg = FitConfig::new(FitMethod::Refined, cal.strike.hit_plane_x).with_noise(noise);
     SpinEstimate::from_fit(&fit_trajectory(&samples, &cal.propagator(), &cfg).ok()?)
 }
@@ -90,16 +89,7 @@ fn logo_estimate(fit: Option<RotationFit>, seq: &Sequence) -> Option<SpinEstimat
 }
 
 fn background(cam: &CameraCalib, seq: &Sequence, cfg: &RotationFitConfig) -> Option<RotationFit> {
-    let inputs: Vec<CropInput<'_>> = seq
-        .frames
-        .iter()
-        .map(|f| CropInput {
-            t: f.label.t,
-            crop: CropImage::new(f.crop.x0, f.crop.y0, f.crop.width as usize, f.crop.height as usize, &f.crop.rgb)
-                .expect("rendered crops are whole"),
-            circle: f.label.measured,
-        })
-        .collect();
+    let inputs: Vec<CropInput<'_>> = seq.frames.iter().map(|f| f.crop_input()).collect();
     let det = DetectorConfig::for_logo(cam.logo_angular_radius());
     let r = process_sequence(cam, &inputs, &det, cfg, LogoMethod::Segment).ok()?;
     r.fit.ok()
@@ -112,21 +102,8 @@ pub fn cnn_fit(
     seq: &Sequence,
     cfg: &RotationFitConfig,
 ) -> Result<Option<RotationFit>, cnn::CnnError> {
-    let crops: Vec<&[u8]> = seq.frames.iter().map(|f| f.crop.rgb.as_slice()).collect();
-    let mut out = vec![CnnOutput { visibility: 0.0, orientation: nalgebra::UnitQuaternion::identity() }; crops.len()];
-    net.infer(&crops, &mut out)?;
-    let samples: Vec<LogoSample> = seq
-        .frames
-        .iter()
-        .zip(&out)
-        .map(|(f, o)| {
-            let m = f.label.measured;
-            let pos = BallView::new(cam, m.u, m.v, m.radius)
-                .and_then(|v| o.seen(cnn::VISIBLE_THRESHOLD).map(|p| v.to_camera(&p)));
-            LogoSample::new(f.label.t, pos)
-        })
-        .collect();
-    Ok(fit_rotation(&samples, cfg).ok().map(|f| f.rotated(&cam.table_from_camera)))
+    let crops: Vec<_> = seq.frames.iter().map(|f| (f.label.t, f.label.measured, f.crop.rgb.as_slice())).collect();
+    Ok(cnn::fit_crops(net, cam, &crops, cfg)?.1.ok())
 }
 
 /// Renders the balls of `opts` and compares the sources on each; the CNN

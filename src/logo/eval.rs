@@ -12,7 +12,7 @@ use serde::Serialize;
 use crate::calib::Calibration;
 use crate::calib::camera::CameraCalib;
 use crate::eval::stats::Summary;
-use crate::logo::detect::{CropImage, DetectorConfig};
+use crate::logo::detect::DetectorConfig;
 use crate::logo::pipeline::{CropInput, LogoMethod, process_sequence};
 use crate::logo::rotation::{LogoSample, RotationFitConfig, fit_rotation};
 use crate::physics::{Vec3, rad_to_rps};
@@ -87,16 +87,7 @@ fn eval_ball(
     if seq.frames.len() < MIN_FRAMES {
         return None;
     }
-    let inputs: Vec<CropInput<'_>> = seq
-        .frames
-        .iter()
-        .map(|f| CropInput {
-            t: f.label.t,
-            crop: CropImage::new(f.crop.x0, f.crop.y0, f.crop.width as usize, f.crop.height as usize, &f.crop.rgb)
-                .expect("rendered crops are whole"),
-            circle: f.label.measured,
-        })
-        .collect();
+    let inputs: Vec<CropInput<'_>> = seq.frames.iter().map(|f| f.crop_input()).collect();
     let det = DetectorConfig::for_logo(cam.logo_angular_radius());
     let mut spin_fit: [Result<[f64; 3], String>; 3] = std::array::from_fn(|_| Err(String::new()));
     let mut measurements = Vec::new();

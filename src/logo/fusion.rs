@@ -17,7 +17,6 @@
 use nalgebra::Matrix3;
 
 use crate::fit::TrajectoryFit;
-use crate::fit::refine::Refined;
 use crate::logo::rotation::RotationFit;
 use crate::physics::Vec3;
 
@@ -41,15 +40,10 @@ pub const UNINFORMED_STD: f64 = 1e3;
 pub const GATE_CHI2: f64 = 16.27;
 
 impl SpinEstimate {
-    /// The trajectory's spin: the refinement's weak axis (along the flight)
-    /// with its data-only 1σ, the other two directions with the rest of
-    /// the reported spread.
-    pub fn from_refined(r: &Refined) -> Self {
-        Self::from_trajectory(r.state.spin, r.spin_std, r.weak_axis, r.weak_axis_std)
-    }
-
-    /// As [`from_refined`](Self::from_refined) from a whole-flight fit;
-    /// `None` for the paper's fit, which reports no uncertainty.
+    /// The trajectory's spin from the refined fit of a flight: the weak
+    /// axis (along the flight) with its data-only 1σ, the other two
+    /// directions with the rest of the reported spread; `None` for the
+    /// paper's fit, which reports no uncertainty.
     pub fn from_fit(f: &TrajectoryFit) -> Option<Self> {
         let (axis, weak_std) = f.weak_axis?;
         Some(Self::from_trajectory(f.spin, f.spin_std?, axis, weak_std))

@@ -50,19 +50,6 @@ impl std::fmt::Debug for Method {
     }
 }
 
-/// What happened to a crop or a sequence (for the counters).
-#[derive(Copy, Clone, Debug, PartialEq, Eq)]
-pub enum LogoEvent {
-    /// A sequence was fitted.
-    Fitted { crops: u16, seen: u16 },
-    /// A sequence could not be fitted (too short, logo unseen, no plane).
-    Unfitted { crops: u16 },
-    /// A crop not 60 × 60, or older than the last.
-    CropDropped,
-    /// The network failed on a batch.
-    InferenceFailed,
-}
-
 /// The logo in the latest crop, as the CNN saw it.
 #[derive(Copy, Clone, Debug, PartialEq)]
 pub struct SeenLogo {
@@ -126,19 +113,18 @@ impl LogoStream {
     }
 
     /// Takes one crop; returns the spin of a sequence it completed.
-    pub fn crop(&mut self, c: &Crop<'_>, events: &mut impl FnMut(LogoEvent)) -> Option<LogoSpin> {
+    pub fn crop(&mut self, c: &Crop<'_>) -> Option<LogoSpin> {
         self.counters.crops += 1;
         if c.width as usize != cnn::INPUT_SIZE
             || c.height as usize != cnn::INPUT_SIZE
             || self.last.is_some_and(|l| c.capture <= l)
         {
             self.counters.dropped += 1;
-            events(LogoEvent::CropDropped);
             return None;
         }
         let mut out = None;
         if self.last.is_some_and(|l| c.capture - l > SEQUENCE_GAP) {
-            out = self.finish(events);
+            out = self.finish();
         }
         self.last = Some(c.capture);
         if self.done {
@@ -150,10 +136,10 @@ impl LogoStream {
         if let Method::Cnn(_) = self.method
             && (self.times.len() - self.outputs.len() == cnn::MAX_BATCH || self.times.len() == SEQUENCE_LEN)
         {
-            self.run_cnn(events);
+            self.run_cnn();
         }
         if self.times.len() == SEQUENCE_LEN {
-            let r = self.fit_sequence(events);
+            let r = self.fit_sequence();
             self.done = true;
             return r.or(out);
         }
@@ -176,17 +162,17 @@ impl LogoStream {
     }
 
     /// Ends a sequence that has gone quiet; call now and then.
-    pub fn poll(&mut self, now: Instant, events: &mut impl FnMut(LogoEvent)) -> Option<LogoSpin> {
+    pub fn poll(&mut self, now: Instant) -> Option<LogoSpin> {
         if self.last.is_some_and(|l| now > l && now - l > SEQUENCE_GAP) {
-            let r = self.finish(events);
+            let r = self.finish();
             self.last = None;
             return r;
         }
         None
     }
 
-    fn finish(&mut self, events: &mut impl FnMut(LogoEvent)) -> Option<LogoSpin> {
-        let r = if self.done || self.times.is_empty() { None } else { self.fit_sequence(events) };
+    fn finish(&mut self) -> Option<LogoSpin> {
+        let r = if self.done || self.times.is_empty() { None } else { self.fit_sequence() };
         self.pixels.clear();
         self.times.clear();
         self.circles.clear();
@@ -195,7 +181,7 @@ impl LogoStream {
         r
     }
 
-    fn run_cnn(&mut self, events: &mut impl FnMut(LogoEvent)) {
+    fn run_cnn(&mut self) {
         let Method::Cnn(net) = &mut self.method else { return };
         let from = self.outputs.len();
         let to = self.times.len();
@@ -203,40 +189,31 @@ impl LogoStream {
         for (k, i) in (from..to).enumerate() {
             crops[k] = &self.pixels[i * CROP_BYTES..(i + 1) * CROP_BYTES];
         }
-        let mut answers =
-            [CnnOutput { visibility: 0.0, orientation: nalgebra::UnitQuaternion::identity() }; cnn::MAX_BATCH];
+        let mut answers = [CnnOutput::default(); cnn::MAX_BATCH];
         if net.infer(&crops[..to - from], &mut answers).is_err() {
             self.counters.inference_failures += 1;
-            events(LogoEvent::InferenceFailed);
         }
         // A failed batch counts as unseen logos.
         self.outputs.extend_from_slice(&answers[..to - from]);
     }
 
-    fn fit_sequence(&mut self, events: &mut impl FnMut(LogoEvent)) -> Option<LogoSpin> {
+    fn fit_sequence(&mut self) -> Option<LogoSpin> {
         let n = self.times.len();
         self.counters.sequences += 1;
         if n < MIN_CROPS {
-            events(LogoEvent::Unfitted { crops: n as u16 });
             return None;
         }
         if let Method::Cnn(_) = self.method
             && self.outputs.len() < n
         {
-            self.run_cnn(events);
+            self.run_cnn();
         }
         let t0 = self.times[0];
         let secs = |t: Instant| (t - t0).as_secs_f64();
         let fit = match &self.method {
             Method::Cnn(_) => {
-                let samples: Vec<LogoSample> = (0..n)
-                    .map(|i| {
-                        let c = self.circles[i];
-                        let pos = BallView::new(&self.cam, c.u, c.v, c.radius)
-                            .and_then(|v| self.outputs[i].seen(cnn::VISIBLE_THRESHOLD).map(|p| v.to_camera(&p)));
-                        LogoSample::new(secs(self.times[i]), pos)
-                    })
-                    .collect();
+                let samples: Vec<LogoSample> =
+                    (0..n).map(|i| self.outputs[i].sample(&self.cam, self.circles[i], secs(self.times[i]))).collect();
                 fit_rotation(&samples, &self.fit).ok().map(|f| f.rotated(&self.cam.table_from_camera))
             }
             Method::Background(m) => {
@@ -254,12 +231,8 @@ impl LogoStream {
                     .and_then(|r| r.fit.ok())
             }
         };
-        let Some(fit) = fit else {
-            events(LogoEvent::Unfitted { crops: n as u16 });
-            return None;
-        };
+        let fit = fit?;
         self.counters.fitted += 1;
-        events(LogoEvent::Fitted { crops: n as u16, seen: fit.seen as u16 });
         let est = SpinEstimate::from_rotation(&fit, secs(self.times[n - 1]));
         Some(LogoSpin { last_crop: self.times[n - 1], spin: est.spin, cov: est.cov })
     }
@@ -288,7 +261,6 @@ mod tests {
             })
             .expect("a filmed ball");
         let mut stream = LogoStream::new(cam, Method::Background(LogoMethod::Segment));
-        let mut events = Vec::new();
         let mut spins = Vec::new();
         let t0 = Instant::from_nanos(1_000_000_000);
         let at = |t: f64| t0 + Duration::from_nanos((t * 1e9) as u64);
@@ -304,13 +276,13 @@ mod tests {
                 height: 60,
                 pixels: &f.crop.rgb,
             };
-            spins.extend(stream.crop(&c, &mut |e| events.push(e)));
+            spins.extend(stream.crop(&c));
             // A repeated crop (same capture time) is dropped, not counted twice.
-            assert!(stream.crop(&c, &mut |e| events.push(e)).is_none());
+            assert!(stream.crop(&c).is_none());
         }
         let last = at(seq.frames.last().unwrap().label.t);
-        assert!(stream.poll(last + Duration::from_millis(50), &mut |e| events.push(e)).is_none());
-        assert_eq!(spins.len(), 1, "{events:?}");
+        assert!(stream.poll(last + Duration::from_millis(50)).is_none());
+        assert_eq!(spins.len(), 1, "{:?}", stream.counters());
         let s = spins[0];
         assert!((s.spin - truth).norm() < 0.15 * truth.norm(), "{:?} vs {truth:?}", s.spin);
         assert!(s.cov.cholesky().is_some(), "covariance SPD");

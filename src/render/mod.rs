@@ -29,6 +29,8 @@ use rand_distr::{Distribution, StandardNormal};
 
 use crate::calib::camera::CameraCalib;
 use crate::logo::ball::{self, Circle};
+use crate::logo::detect::CropImage;
+use crate::logo::pipeline::CropInput;
 use crate::logo::view::BallView;
 use crate::physics::{Propagator, Vec3};
 use crate::sim::truth::Flight;
@@ -190,6 +192,19 @@ pub struct FrameLabel {
 pub struct Frame {
     pub crop: Crop,
     pub label: FrameLabel,
+}
+
+impl Frame {
+    /// The crop as the logo detector takes it.
+    pub fn crop_image(&self) -> CropImage<'_> {
+        let c = &self.crop;
+        CropImage::new(c.x0, c.y0, c.width as usize, c.height as usize, &c.rgb).expect("rendered crops are whole")
+    }
+
+    /// The crop with its capture time and measured circle (a sequence's input).
+    pub fn crop_input(&self) -> CropInput<'_> {
+        CropInput { t: self.label.t, crop: self.crop_image(), circle: self.label.measured }
+    }
 }
 
 /// The frames of one ball, consecutive camera frames before its bounce.

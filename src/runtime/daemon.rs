@@ -462,7 +462,6 @@ fn logo_loop(
     let mut clock = ClockMap::new(latency.0);
     let mut foreign = 0u64;
     let mut malformed = 0u64;
-    let mut ignore = |_| {};
     while !stop.load(Ordering::Acquire) {
         let spin = match socket.recv_from(&mut buf) {
             Ok((n, from)) => {
@@ -474,7 +473,7 @@ fn logo_loop(
                     Ok(mut c) => {
                         // The camera's clock mapped onto ours, as the tracker's is.
                         c.capture = clock.map(c.capture.0, runtime::now());
-                        let spin = stream.crop(&c, &mut ignore);
+                        let spin = stream.crop(&c);
                         if let Some(v) = viewer.as_mut() {
                             v.push(logo_record(&c, stream.last_logo()));
                         }
@@ -486,7 +485,7 @@ fn logo_loop(
                     }
                 }
             }
-            Err(_) => stream.poll(runtime::now(), &mut ignore),
+            Err(_) => stream.poll(runtime::now()),
         };
         if let Some(s) = spin {
             let _ = spins.push(s);

@@ -38,7 +38,7 @@ pub fn check(backend: Backend) {
             })
         })
         .collect();
-    let mut out = vec![CnnOutput { visibility: 0.0, orientation: nalgebra::UnitQuaternion::identity() }; n];
+    let mut out = vec![CnnOutput::default(); n];
     net.infer_floats(&x, &mut out).expect("inference");
     for (b, o) in out.iter().enumerate() {
         let v = reference["visibility"][b].as_f64().unwrap();

@@ -32,7 +32,7 @@ use crate::logo::pipeline::LogoMethod;
 use crate::logo::rotation::{LogoSample, RotationFit, RotationFitConfig, fit_rotation};
 use crate::logo::view::BallView;
 use crate::physics::Vec3;
-use crate::render::{BallColour, Frame, Scene, Sequence, SequenceOptions, render_sequence};
+use crate::render::{BallColour, Scene, Sequence, SequenceOptions, render_sequence};
 use crate::sim::{Setting, SimBall, simulate_ball};
 
 /// A way of estimating a flight's spin, as the rows of Table IV.
@@ -226,12 +226,6 @@ pub fn pre_net_samples(ball: &SimBall) -> Vec<Sample> {
     ball.observations.iter().filter(|o| o.t < end).map(|o| Sample::new(o.t, o.pos)).collect()
 }
 
-/// A crop of a rendered frame as the detector takes it.
-pub fn crop_of(f: &Frame) -> CropImage<'_> {
-    CropImage::new(f.crop.x0, f.crop.y0, f.crop.width as usize, f.crop.height as usize, &f.crop.rgb)
-        .expect("rendered crops are whole")
-}
-
 /// The background method over a sequence: per frame the measurement (or
 /// none), with the seconds spent (reference + detection) on `clock`.
 pub fn bg_measurements(
@@ -246,7 +240,7 @@ pub fn bg_measurements(
         .iter()
         .map(|f| {
             let m = f.label.measured;
-            BallView::new(cam, m.u, m.v, m.radius).map(|v| (crop_of(f), v))
+            BallView::new(cam, m.u, m.v, m.radius).map(|v| (f.crop_image(), v))
         })
         .collect::<Option<_>>()?;
     let reference = BallReference::from_crops(&pairs, det.colour_fraction)?;
@@ -425,7 +419,7 @@ pub fn run_cnn(
                 continue;
             };
             let t0 = clock();
-            let p = predictor.predict(&crop_of(f), &view);
+            let p = predictor.predict(&f.crop_image(), &view);
             flight.cnn_seconds += clock() - t0;
             let visible = p.visibility > 0.0;
             frames.classified_right += (visible == l.logo_visible) as usize;
