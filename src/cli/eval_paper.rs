@@ -2,9 +2,10 @@
 //! metrics, real data) and figures in one run: `DIR/tables.md`,
 //! `DIR/results.json` and `DIR/*.svg`, with a progress bar on stderr.
 //!
-//! The CNN and the fused estimate plug in through
-//! [`crate::eval::paper::Extensions`]: give `run_tables` a
-//! `&mut dyn CropPredictor` / `&mut dyn SpinFusion` and their rows fill.
+//! The CNN (`--model`, `--backend`; `--no-cnn` leaves it out) and the
+//! fused estimate (`--fuse-logo`) plug in through
+//! [`crate::eval::paper::Extensions`] as [`crate::eval::paper::plug`]'s
+//! predictor and fusion.
 
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
@@ -20,6 +21,7 @@ use crate::data::eval::prepare;
 use crate::data::frame::MPI_LAB_TO_TABLE;
 use crate::data::mpi::{load, locate};
 use crate::demo::{DemoConfig, run_loopback};
+use crate::eval::paper::plug::{CnnPredictor, FusedLogo, TrajectoryLogoFusion};
 use crate::eval::paper::report::{Histogram, LatencyRun, PaperReport, markdown};
 use crate::eval::paper::{Extensions, PaperConfig, Progress, figures, run_tables};
 
@@ -57,6 +59,19 @@ pub struct EvalPaperArgs {
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
+    /// The CNN's ONNX model (default: models/logo-compact.onnx).
+    #[arg(long, value_name = "FILE")]
+    pub model: Option<PathBuf>,
+    /// CNN backend: auto (ONNX Runtime when ORT_DYLIB_PATH names its
+    /// library, else tract), tract or onnxruntime.
+    #[arg(long, value_enum, default_value = "auto")]
+    pub backend: crate::logo::cnn::Backend,
+    /// Leave the CNN out (its rows say "no model").
+    #[arg(long)]
+    pub no_cnn: bool,
+    /// The logo estimate fused with the refined trajectory fit.
+    #[arg(long, value_enum, default_value = "segment")]
+    pub fuse_logo: FusedLogo,
 }
 
 /// An indicatif bar per stage.
@@ -161,12 +176,34 @@ pub fn run_paper(a: EvalPaperArgs) -> anyhow::Result<()> {
         },
         None => (None, Some("MPI launcher data not found (`--data DIR` or `$TOPSPIN_MPI_DATA`): skipped.".to_owned())),
     };
+    if a.no_cnn && a.fuse_logo == FusedLogo::Cnn {
+        return Err(BadInput("--fuse-logo cnn needs the CNN (drop --no-cnn)".into()).into());
+    }
+    let mut cnn = if a.no_cnn {
+        None
+    } else {
+        let model = a.model.clone().unwrap_or_else(crate::logo::cnn::default_model);
+        let net = super::logo_cnn::load(&model, &a.backend)?;
+        let name = format!(
+            "{} on {}",
+            model.file_name().map_or_else(|| model.display().to_string(), |f| f.to_string_lossy().into_owned()),
+            net.backend().name()
+        );
+        Some(CnnPredictor::new(net, name))
+    };
+    let mut fusion = TrajectoryLogoFusion::new(a.fuse_logo);
     let load_before = load_average();
     let bar = Bar::new(a.quiet);
     let epoch = Instant::now();
     let clock = move || epoch.elapsed().as_secs_f64();
-    // The CNN and the fusion plug in here (`Extensions { cnn: Some(..), fusion: Some(..) }`).
-    let mut tables = run_tables(&cal, &cam, &cfg, real.as_deref(), Extensions::default(), &bar, &clock);
+    let ext = Extensions {
+        cnn: cnn.as_mut().map(|c| c as &mut dyn crate::eval::paper::flights::CropPredictor),
+        fusion: Some(&mut fusion),
+    };
+    let mut tables = run_tables(&cal, &cam, &cfg, real.as_deref(), ext, &bar, &clock);
+    if let Some(name) = &mut tables.set.fusion_name {
+        *name += &format!(": logo fused on {} flights, gated out on {}", fusion.fused, fusion.gated);
+    }
     let latency = if a.latency_s > 0.0 {
         bar.stage(&format!("latency bench ({} s)", a.latency_s), 1);
         let t0 = Instant::now();
@@ -203,6 +240,19 @@ pub fn run_paper(a: EvalPaperArgs) -> anyhow::Result<()> {
     );
     if a.latency_s != 5.0 {
         command += &format!(" --latency-s {}", a.latency_s);
+    }
+    if a.no_cnn {
+        command += " --no-cnn";
+    } else {
+        if let Some(m) = &a.model {
+            command += &format!(" --model {}", m.display());
+        }
+        if a.backend != crate::logo::cnn::Backend::Auto {
+            command += &format!(" --backend {}", a.backend.name());
+        }
+    }
+    if a.fuse_logo != FusedLogo::Segment {
+        command += " --fuse-logo cnn";
     }
     let report = PaperReport {
         command,

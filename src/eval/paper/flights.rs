@@ -26,6 +26,7 @@ use super::{Clock, PaperConfig, Progress, ball_index};
 use crate::calib::Calibration;
 use crate::calib::camera::CameraCalib;
 use crate::fit::{FitConfig, Method, Sample, TrajectoryFit, fit_trajectory};
+use crate::logo::cnn::{geodesic_deg, swing_to};
 use crate::logo::detect::{BallReference, CropImage, DetectorConfig, LogoMeasurement, detect};
 use crate::logo::eval::MIN_FRAMES;
 use crate::logo::pipeline::LogoMethod;
@@ -122,9 +123,10 @@ pub struct CropPrediction {
     pub visibility: f64,
     /// The logo's centre on the unit sphere, camera frame.
     pub logo_camera: Option<Vec3>,
-    /// The ball's pose (body → camera), where the predictor gives one
-    /// (for the geodesic error).
-    pub camera_from_body: Option<UnitQuaternion<f64>>,
+    /// The swing from the view frame's +z onto the logo, where the
+    /// predictor gives one (for the geodesic error): the ball's pose up to
+    /// the twist about the logo's axis, which a circular logo cannot show.
+    pub logo_swing: Option<UnitQuaternion<f64>>,
 }
 
 /// A per-crop logo predictor: the CNN plugs in here. It sees the crop as
@@ -191,6 +193,8 @@ pub struct FlightFits {
     pub bg: [Option<RotationFit>; 3],
     /// The CNN's, table frame.
     pub cnn: Option<RotationFit>,
+    /// Seconds from the first crop to the last (the logo fits' span).
+    pub logo_span: f64,
 }
 
 /// Everything a fusion sees of one flight.
@@ -284,7 +288,10 @@ fn process(
     }
     let (ms, bg_seconds) = bg_measurements(cam, &seq, clock)?;
     let rot_cfg = RotationFitConfig::default();
-    let mut fits = FlightFits::default();
+    let mut fits = FlightFits {
+        logo_span: seq.frames.last().map_or(0.0, |l| l.label.t) - seq.frames.first().map_or(0.0, |f| f.label.t),
+        ..FlightFits::default()
+    };
     let mut estimates = vec![Estimate::NoModel; SpinMethod::ALL.len()];
     for (i, variant) in LogoMethod::ALL.into_iter().enumerate() {
         let r = fit_rotation(&logo_samples(&seq, &ms, variant), &rot_cfg).map(|f| f.rotated(&cam.table_from_camera));
@@ -386,11 +393,6 @@ pub fn collect(
     set
 }
 
-/// The geodesic distance of two rotations, degrees.
-pub fn geodesic_deg(a: &UnitQuaternion<f64>, b: &UnitQuaternion<f64>) -> f64 {
-    (2.0 * a.coords.dot(&b.coords).abs().min(1.0).acos()).to_degrees()
-}
-
 /// Runs `predictor` over every crop of every flight (sequences must have
 /// been kept), fits the rotation from its logo positions and fills the
 /// CNN's estimate and frame metrics.
@@ -428,8 +430,8 @@ pub fn run_cnn(
                 && l.logo_facing > limb
             {
                 frames.angle_err.push(pos.angle(&l.logo_camera).to_degrees());
-                if let Some(q) = p.camera_from_body {
-                    frames.geodesic_err.push(geodesic_deg(&q, &l.camera_from_body));
+                if let Some(q) = p.logo_swing {
+                    frames.geodesic_err.push(geodesic_deg(&q, &swing_to(&view.to_view(&l.logo_camera))));
                 }
             }
             samples.push(LogoSample::new(l.t, pos.map(|v| v.normalize())));

@@ -12,6 +12,8 @@
 //! - [`logo_metrics`]: §III/§V, vector-angle, classification and geodesic
 //!   errors and the processing time per crop of each logo method.
 //! - [`real`]: bounce and 0.3 s-ahead error on the real recordings.
+//! - [`plug`]: the product's CNN and logo + trajectory fusion as those
+//!   extensions.
 //! - [`figures`]: the paper's figures (and ours) as SVG, with plotters.
 //! - [`report`]: the whole run as Markdown (`tables.md`) and JSON.
 //!
@@ -24,6 +26,7 @@ pub mod classify;
 pub mod figures;
 pub mod flights;
 pub mod logo_metrics;
+pub mod plug;
 pub mod real;
 pub mod report;
 
