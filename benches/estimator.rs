@@ -9,7 +9,7 @@ use std::time::Instant as WallClock;
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use topspin::calib::Calibration;
-use topspin::estimator::{Estimator, EstimatorConfig};
+use topspin::estimator::{Estimator, EstimatorConfig, EstimatorEvent};
 use topspin::eval::stream::{StreamSetup, simulate_stream};
 use topspin::physics::Vec3;
 use topspin::time::Instant;
@@ -24,27 +24,57 @@ fn observations() -> Vec<(Instant, Vec3)> {
         .collect()
 }
 
+/// The kind of step an observation was, for the split of the tail.
+#[derive(Copy, Clone, PartialEq)]
+enum Step {
+    /// The observation that starts a track (start filter, cubic, EKF over
+    /// the candidates, first prediction): once per ball.
+    Start,
+    /// A tracked observation that produced a plan (EKF, refit, prediction).
+    Plan,
+    /// Anything else (candidate collected, withheld, after the hit).
+    Other,
+}
+
 fn percentiles(obs: &[(Instant, Vec3)]) {
     let cal = Calibration::default_cell();
-    let mut ns = Vec::with_capacity(obs.len() * 5);
+    let mut timed: Vec<(f64, Step)> = Vec::with_capacity(obs.len() * 5);
     for _ in 0..5 {
         let mut est = Estimator::new(&cal, EstimatorConfig::default());
         for &(t, p) in obs {
             let start = WallClock::now();
-            black_box(est.observe(t, p));
-            ns.push(start.elapsed().as_nanos() as f64);
+            let out = black_box(est.observe(t, p));
+            let ns = start.elapsed().as_nanos() as f64;
+            let step = if out.events.iter().any(|e| matches!(e, EstimatorEvent::Started { .. })) {
+                Step::Start
+            } else if out.plan.is_some() {
+                Step::Plan
+            } else {
+                Step::Other
+            };
+            timed.push((ns, step));
         }
     }
-    ns.sort_by(f64::total_cmp);
-    let q = |p: f64| ns[((ns.len() - 1) as f64 * p) as usize] / 1e3;
-    println!(
-        "estimator/observe per observation ({} samples): p50 {:.1} µs  p99 {:.1} µs  p99.9 {:.1} µs  max {:.1} µs",
-        ns.len(),
-        q(0.5),
-        q(0.99),
-        q(0.999),
-        ns[ns.len() - 1] / 1e3
-    );
+    let report = |name: &str, keep: &dyn Fn(Step) -> bool| {
+        let mut ns: Vec<f64> = timed.iter().filter(|(_, s)| keep(*s)).map(|(n, _)| *n).collect();
+        if ns.is_empty() {
+            return;
+        }
+        ns.sort_by(f64::total_cmp);
+        let q = |p: f64| ns[((ns.len() - 1) as f64 * p) as usize] / 1e3;
+        println!(
+            "estimator/observe {name} ({} samples): p50 {:.1} µs  p99 {:.1} µs  p99.9 {:.1} µs  max {:.1} µs",
+            ns.len(),
+            q(0.5),
+            q(0.99),
+            q(0.999),
+            ns[ns.len() - 1] / 1e3
+        );
+    };
+    report("per observation", &|_| true);
+    report("  starting a track", &|s| s == Step::Start);
+    report("  tracked, with a plan", &|s| s == Step::Plan);
+    report("  other", &|s| s == Step::Other);
 }
 
 fn benches(c: &mut Criterion) {

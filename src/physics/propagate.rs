@@ -5,9 +5,12 @@
 
 use super::{BallState, BounceModel, FlightModel, Table, Vec3};
 
-/// Default integration step in seconds (RK4's error at 2 ms is far below a
-/// micrometre over a flight).
-pub const DEFAULT_STEP: f64 = 0.002;
+/// Default integration step in seconds. RK4's error at 4 ms stays below a
+/// micrometre over a 0.4 s flight with 400 rad/s of spin
+/// (`step_size_does_not_matter`), and events are located inside the step;
+/// 4 ms rather than 2 ms halves the estimator's per-observation prediction
+/// (its p99 was 63 µs at 2 ms against a 50 µs budget).
+pub const DEFAULT_STEP: f64 = 0.004;
 
 /// Height of the floor below the table surface, m (ITTF: 0.76).
 pub const FLOOR_DEPTH: f64 = 0.76;
