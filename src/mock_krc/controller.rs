@@ -83,6 +83,8 @@ pub struct PathSample {
     pub actual: [f64; 6],
     /// This cycle's answer came on time.
     pub on_time: bool,
+    /// The robot's own velocity/acceleration limits bent the command.
+    pub robot_limited: bool,
 }
 
 /// The controller (see the module doc).
@@ -200,10 +202,17 @@ impl MockController {
             }
         }
         self.apply_poscorr();
-        self.follow();
+        let robot_limited = self.follow();
         self.cycles += 1;
         self.ipoc += self.cfg.cycle_ms as u64;
-        PathSample { t: next_t, ipoc: self.ipoc, commanded: self.commanded, actual: self.actual, on_time }
+        PathSample {
+            t: next_t,
+            ipoc: self.ipoc,
+            commanded: self.commanded,
+            actual: self.actual,
+            on_time,
+            robot_limited,
+        }
     }
 
     fn apply_poscorr(&mut self) {
@@ -241,7 +250,8 @@ impl MockController {
         }
     }
 
-    fn follow(&mut self) {
+    /// One cycle of the robot towards the command; true where its limits acted.
+    fn follow(&mut self) -> bool {
         let dt = self.cfg.cycle_ms as f64 * 1e-3;
         let mut limited = false;
         for i in 0..6 {
@@ -255,5 +265,6 @@ impl MockController {
         if limited {
             self.robot_limited += 1;
         }
+        limited
     }
 }

@@ -117,13 +117,15 @@ pub struct MockResult {
 }
 
 impl MockResult {
-    /// Writes the path as CSV: time, IPOC, commanded and actual pose.
+    /// Writes the path as CSV: time, IPOC, on time, robot limited, commanded
+    /// and actual pose.
     pub fn write_csv(&self, path: &Path) -> io::Result<()> {
         let mut w = csv::Writer::from_path(path)?;
         w.write_record([
             "t_s",
             "ipoc",
             "on_time",
+            "robot_limited",
             "cmd_x_mm",
             "cmd_y_mm",
             "cmd_z_mm",
@@ -138,7 +140,12 @@ impl MockResult {
             "act_c_deg",
         ])?;
         for s in &self.path {
-            let mut rec = vec![format!("{:.6}", s.t.as_secs_f64()), s.ipoc.to_string(), (s.on_time as u8).to_string()];
+            let mut rec = vec![
+                format!("{:.6}", s.t.as_secs_f64()),
+                s.ipoc.to_string(),
+                (s.on_time as u8).to_string(),
+                (s.robot_limited as u8).to_string(),
+            ];
             rec.extend(s.commanded.iter().map(|x| format!("{x:.4}")));
             rec.extend(s.actual.iter().map(|x| format!("{x:.4}")));
             w.write_record(&rec)?;
