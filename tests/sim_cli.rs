@@ -124,3 +124,26 @@ fn unusable_input_exits_2_with_one_line() {
     assert_eq!(out.status.code(), Some(2));
     let _ = std::fs::remove_file(&file);
 }
+
+#[test]
+fn a_closed_pipe_ends_the_listing_quietly() {
+    // `topspin sim … | head -1`: the reader goes away after the first line.
+    use std::io::{BufRead, BufReader};
+    use std::os::unix::process::ExitStatusExt;
+    let dir = temp_dir("pipe");
+    let mut child = Command::new(BIN)
+        .args(["sim", "--balls", "1000", "--out"])
+        .arg(&dir)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut first = String::new();
+    BufReader::new(child.stdout.take().unwrap()).read_line(&mut first).unwrap();
+    assert!(first.starts_with("ball 000"), "{first}");
+    let out = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert_eq!(out.status.signal(), Some(libc::SIGPIPE), "{:?}: {stderr}", out.status);
+    let _ = std::fs::remove_dir_all(&dir);
+}

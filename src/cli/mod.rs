@@ -64,9 +64,25 @@ pub enum Command {
     Replay(replay::ReplayArgs),
 }
 
+/// Offline commands end quietly when their reader goes away
+/// (`topspin sim … | head`), as Unix tools do, instead of panicking on the
+/// write. The daemon and the mock KR C4 keep Rust's default (SIGPIPE
+/// ignored, a write error instead): a restarted journal must not kill them.
+#[allow(unsafe_code)]
+fn die_quietly_on_a_closed_pipe() {
+    // SAFETY: sets one signal's disposition to its default, before this
+    // process starts any thread.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
+}
+
 /// Runs the command line; returns the process exit code.
 pub fn main() -> i32 {
     let cli = Cli::parse();
+    if !matches!(cli.command, Command::Run(_) | Command::MockKrc(_)) {
+        die_quietly_on_a_closed_pipe();
+    }
     let result = match cli.command {
         Command::Run(a) => run::run(a),
         Command::Sim(a) => sim::run(a),
