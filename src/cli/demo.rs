@@ -36,12 +36,9 @@ pub struct DemoArgs {
     /// `background`; its spins are fused into the estimator's.
     #[arg(long, value_name = "METHOD")]
     pub logo: Option<crate::config::LogoMethodConfig>,
-    /// --logo cnn: the ONNX model (default: models/logo-compact.onnx).
-    #[arg(long, value_name = "FILE")]
-    pub model: Option<std::path::PathBuf>,
-    /// --logo cnn: auto, tract or onnxruntime.
-    #[arg(long, value_enum, default_value = "auto")]
-    pub backend: crate::logo::cnn::Backend,
+    /// --logo cnn: the network.
+    #[command(flatten)]
+    pub cnn: super::logo_cnn::CnnArgs,
     /// Serve the live Foxglove view (WebSocket) on ADDR (default 127.0.0.1:8765).
     #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = crate::viewer::DEFAULT_LIVE_ADDR)]
     pub live: Option<std::net::SocketAddr>,
@@ -83,8 +80,8 @@ pub fn run(a: DemoArgs) -> anyhow::Result<()> {
             source: Some([127, 0, 0, 1].into()),
             method: match method {
                 crate::config::LogoMethodConfig::Cnn => crate::runtime::daemon::LogoMethodChoice::Cnn {
-                    model: a.model.clone().unwrap_or_else(crate::logo::cnn::default_model),
-                    backend: a.backend.clone(),
+                    model: a.cnn.model_path(),
+                    backend: a.cnn.backend.clone(),
                 },
                 crate::config::LogoMethodConfig::Background => crate::runtime::daemon::LogoMethodChoice::Background,
             },

@@ -59,13 +59,8 @@ pub struct EvalPaperArgs {
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
-    /// The CNN's ONNX model (default: models/logo-compact.onnx).
-    #[arg(long, value_name = "FILE")]
-    pub model: Option<PathBuf>,
-    /// CNN backend: auto (ONNX Runtime when ORT_DYLIB_PATH names its
-    /// library, else tract), tract or onnxruntime.
-    #[arg(long, value_enum, default_value = "auto")]
-    pub backend: crate::logo::cnn::Backend,
+    #[command(flatten)]
+    pub cnn: super::logo_cnn::CnnArgs,
     /// Leave the CNN out (its rows say "no model").
     #[arg(long)]
     pub no_cnn: bool,
@@ -182,8 +177,8 @@ pub fn run_paper(a: EvalPaperArgs) -> anyhow::Result<()> {
     let mut cnn = if a.no_cnn {
         None
     } else {
-        let model = a.model.clone().unwrap_or_else(crate::logo::cnn::default_model);
-        let net = super::logo_cnn::load(&model, &a.backend)?;
+        let model = a.cnn.model_path();
+        let net = a.cnn.load()?;
         let name = format!(
             "{} on {}",
             model.file_name().map_or_else(|| model.display().to_string(), |f| f.to_string_lossy().into_owned()),
@@ -244,11 +239,11 @@ pub fn run_paper(a: EvalPaperArgs) -> anyhow::Result<()> {
     if a.no_cnn {
         command += " --no-cnn";
     } else {
-        if let Some(m) = &a.model {
+        if let Some(m) = &a.cnn.model {
             command += &format!(" --model {}", m.display());
         }
-        if a.backend != crate::logo::cnn::Backend::Auto {
-            command += &format!(" --backend {}", a.backend.name());
+        if a.cnn.backend != crate::logo::cnn::Backend::Auto {
+            command += &format!(" --backend {}", a.cnn.backend.name());
         }
     }
     if a.fuse_logo != FusedLogo::Segment {

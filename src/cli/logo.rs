@@ -44,13 +44,8 @@ pub struct LogoArgs {
     /// The CNN's metrics and speed on a `topspin render --out` folder.
     #[arg(long, value_name = "DIR", conflicts_with = "folder")]
     pub cnn_eval: Option<PathBuf>,
-    /// The CNN's ONNX model (default: models/logo-compact.onnx).
-    #[arg(long, value_name = "FILE")]
-    pub model: Option<PathBuf>,
-    /// Inference backend: auto (ONNX Runtime when ORT_DYLIB_PATH names its
-    /// library, else tract), tract or onnxruntime.
-    #[arg(long, value_enum, default_value = "auto")]
-    pub backend: crate::logo::cnn::Backend,
+    #[command(flatten)]
+    pub cnn: logo_cnn::CnnArgs,
     /// --compare: leave the CNN out.
     #[arg(long)]
     pub no_cnn: bool,
@@ -105,9 +100,8 @@ fn parse_gap_rule(s: &str) -> Result<GapRule, BadInput> {
 pub fn run(a: LogoArgs) -> anyhow::Result<()> {
     let cam = CameraCalib::load(a.calib.as_deref()).map_err(|e| bad(e.to_string()))?;
     let fit_cfg = RotationFitConfig { gap_rule: parse_gap_rule(&a.gap_rule)?, ..RotationFitConfig::default() };
-    let model = a.model.clone().unwrap_or_else(crate::logo::cnn::default_model);
     if let Some(dir) = &a.cnn_eval {
-        let mut net = logo_cnn::load(&model, &a.backend)?;
+        let mut net = a.cnn.load()?;
         return logo_cnn::run_cnn_eval(dir, &mut net, a.json);
     }
     if a.compare {
@@ -119,14 +113,14 @@ pub fn run(a: LogoArgs) -> anyhow::Result<()> {
             _ => BallColour::Orange,
         };
         let opts = logo_cnn::compare_options(a.seed, a.balls, parse_settings(&a.setting)?, colour, a.frames);
-        let mut net = if a.no_cnn { None } else { Some(logo_cnn::load(&model, &a.backend)?) };
+        let mut net = if a.no_cnn { None } else { Some(a.cnn.load()?) };
         return logo_cnn::run_compare(a.calib.as_deref(), &cam, &opts, net.as_mut(), a.json);
     }
     if a.method == "cnn" {
         let Some(folder) = a.folder.as_deref() else {
             return Err(bad("FOLDER is required with --method cnn"));
         };
-        let mut net = logo_cnn::load(&model, &a.backend)?;
+        let mut net = a.cnn.load()?;
         return logo_cnn::run_folder(folder, &read_folder(folder)?, &cam, &fit_cfg, &mut net, a.json);
     }
     let method = parse_method(&a.method)?;

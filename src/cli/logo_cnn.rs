@@ -9,7 +9,7 @@
 //!   simulated flights ([`crate::logo::compare`]).
 
 use std::fmt::Write as _;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use serde_json::json;
 
@@ -29,9 +29,29 @@ fn bad(msg: impl Into<String>) -> anyhow::Error {
     BadInput(msg.into()).into()
 }
 
-/// Loads the network or says, in one line, why not.
-pub fn load(model: &Path, backend: &cnn::Backend) -> anyhow::Result<LogoCnn> {
-    LogoCnn::load(model, backend).map_err(|e| bad(e.to_string()))
+/// The CNN's model and backend on the command line (`logo`, `demo`,
+/// `eval paper`).
+#[derive(Clone, Debug, clap::Args)]
+pub struct CnnArgs {
+    /// The CNN's ONNX model (default: $TOPSPIN_LOGO_MODEL, else
+    /// models/logo-compact.onnx).
+    #[arg(long, value_name = "FILE")]
+    pub model: Option<PathBuf>,
+    /// CNN backend: auto (ONNX Runtime when ORT_DYLIB_PATH names its
+    /// library, else tract), tract or onnxruntime.
+    #[arg(long, value_enum, default_value = "auto")]
+    pub backend: cnn::Backend,
+}
+
+impl CnnArgs {
+    pub fn model_path(&self) -> PathBuf {
+        self.model.clone().unwrap_or_else(cnn::default_model)
+    }
+
+    /// Loads the network or says, in one line, why not.
+    pub fn load(&self) -> anyhow::Result<LogoCnn> {
+        LogoCnn::load(&self.model_path(), &self.backend).map_err(|e| bad(e.to_string()))
+    }
 }
 
 struct Labelled {
