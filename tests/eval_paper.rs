@@ -7,6 +7,8 @@
 use std::path::PathBuf;
 use std::process::Command;
 
+use topspin::eval::paper::flights::SpinMethod;
+
 const BIN: &str = env!("CARGO_BIN_EXE_topspin");
 
 const SETTINGS: [&str; 9] = [
@@ -20,14 +22,6 @@ const SETTINGS: [&str; 9] = [
     "topspin-medium",
     "topspin-high",
 ];
-
-/// A method's place in each flight's `estimates`.
-fn index(method: &str) -> usize {
-    ["bg_centroid", "bg_segment", "bg_weighted", "cnn", "trajectory_paper", "trajectory_refined", "fused"]
-        .iter()
-        .position(|m| *m == method)
-        .unwrap()
-}
 
 fn temp_dir(name: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("topspin-eval-paper-{name}-{}", std::process::id()));
@@ -106,10 +100,10 @@ fn a_tiny_run_writes_the_tables_the_json_and_figures() {
     assert!(r["cnn"].as_str().unwrap().contains("logo-compact.onnx on tract"), "{}", r["cnn"]);
     assert!(r["fusion"].as_str().unwrap().contains("logo fused on"), "{}", r["fusion"]);
     // The fusion falls back on the trajectory: it answers wherever that does.
-    let answered = |m: &str| {
-        r["flights"].as_array().unwrap().iter().filter(|f| f["estimates"][index(m)].get("spin").is_some()).count()
+    let answered = |m: SpinMethod| {
+        r["flights"].as_array().unwrap().iter().filter(|f| f["estimates"][m.index()].get("spin").is_some()).count()
     };
-    assert_eq!(answered("fused"), answered("trajectory_refined"));
+    assert_eq!(answered(SpinMethod::Fused), answered(SpinMethod::TrajectoryRefined));
 
     // The logo metrics: the CNN sees the logo about as well as it did on
     // its own test crops (0.99; the rendered flights are the same camera).

@@ -183,7 +183,10 @@ fn ten_thousand_cycles_of_strikes() {
         }
     }
     // The robot's own limiter acts only where a late answer made it hold a
-    // command, until it has caught up with the path again.
+    // command, until it has caught up with the path again: at the command
+    // with the command's velocity (two cycles in a row on it, both answered
+    // on time).
+    let on_path = |s: &mock_krc::PathSample| s.on_time && (0..6).all(|i| (s.commanded[i] - s.actual[i]).abs() < 1e-6);
     let mut catching_up: Option<usize> = None;
     let mut longest = 0;
     for (k, s) in r.path.iter().enumerate() {
@@ -196,10 +199,6 @@ fn ten_thousand_cycles_of_strikes() {
             };
             longest = longest.max(k - late);
         }
-        // Caught up: at the command with the command's velocity (two cycles
-        // in a row on it, both answered on time).
-        let on_path =
-            |s: &mock_krc::PathSample| s.on_time && (0..6).all(|i| (s.commanded[i] - s.actual[i]).abs() < 1e-6);
         if on_path(s) && k > 0 && on_path(&r.path[k - 1]) {
             catching_up = None;
         }

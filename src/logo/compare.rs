@@ -84,8 +84,7 @@ fn trajectory_estimate(cal: &Calibration, b: &SimBall, noise: f64) -> Option<Spi
 }
 
 fn logo_estimate(fit: Option<RotationFit>, seq: &Sequence) -> Option<SpinEstimate> {
-    let span = seq.frames.last()?.label.t - seq.frames.first()?.label.t;
-    fit.map(|f| SpinEstimate::from_rotation(&f, span))
+    fit.map(|f| SpinEstimate::from_rotation(&f, seq.span()))
 }
 
 fn background(cam: &CameraCalib, seq: &Sequence, cfg: &RotationFitConfig) -> Option<RotationFit> {

@@ -218,6 +218,16 @@ pub struct Sequence {
     pub frames: Vec<Frame>,
 }
 
+impl Sequence {
+    /// Seconds from the first frame to the last (0 without frames).
+    pub fn span(&self) -> f64 {
+        match (self.frames.first(), self.frames.last()) {
+            (Some(a), Some(b)) => b.label.t - a.label.t,
+            _ => 0.0,
+        }
+    }
+}
+
 impl Scene {
     pub fn new(cam: CameraCalib, colour: BallColour) -> Self {
         Self::with_conditions(cam, colour, Conditions::default())

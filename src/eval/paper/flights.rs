@@ -288,10 +288,7 @@ fn process(
     }
     let (ms, bg_seconds) = bg_measurements(cam, &seq, clock)?;
     let rot_cfg = RotationFitConfig::default();
-    let mut fits = FlightFits {
-        logo_span: seq.frames.last().map_or(0.0, |l| l.label.t) - seq.frames.first().map_or(0.0, |f| f.label.t),
-        ..FlightFits::default()
-    };
+    let mut fits = FlightFits { logo_span: seq.span(), ..FlightFits::default() };
     let mut estimates = vec![Estimate::NoModel; SpinMethod::ALL.len()];
     for (i, variant) in LogoMethod::ALL.into_iter().enumerate() {
         let r = fit_rotation(&logo_samples(&seq, &ms, variant), &rot_cfg).map(|f| f.rotated(&cam.table_from_camera));
