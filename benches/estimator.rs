@@ -8,11 +8,11 @@ use std::hint::black_box;
 use std::time::Instant as WallClock;
 
 use criterion::{Criterion, criterion_group, criterion_main};
-use topspin::calib::Calibration;
-use topspin::estimator::{Estimator, EstimatorConfig, EstimatorEvent};
-use topspin::eval::stream::{StreamSetup, simulate_stream};
-use topspin::physics::Vec3;
-use topspin::time::Instant;
+use topspin_core::calib::Calibration;
+use topspin_core::estimator::{Estimator, EstimatorConfig, EstimatorEvent};
+use topspin_lab::eval::stream::{StreamSetup, simulate_stream};
+use topspin_core::physics::Vec3;
+use topspin_core::time::Instant;
 
 fn observations() -> Vec<(Instant, Vec3)> {
     let cal = Calibration::default_cell();

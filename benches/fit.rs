@@ -5,11 +5,11 @@
 use std::hint::black_box;
 
 use criterion::{Criterion, criterion_group, criterion_main};
-use topspin::calib::Calibration;
-use topspin::fit::poly::Cubic;
-use topspin::fit::refine::{RefineConfig, refine};
-use topspin::fit::{Sample, magnus, predict};
-use topspin::physics::{BallState, Vec3};
+use topspin_core::calib::Calibration;
+use topspin_core::fit::poly::Cubic;
+use topspin_core::fit::refine::{RefineConfig, refine};
+use topspin_core::fit::{Sample, magnus, predict};
+use topspin_core::physics::{BallState, Vec3};
 
 /// 60 observations at 150 Hz of a topspin ball from the opponent's end,
 /// with a deterministic 2 mm-scale wobble standing in for noise.

@@ -5,14 +5,14 @@
 use std::hint::black_box;
 
 use criterion::{Criterion, criterion_group, criterion_main};
-use topspin::calib::Calibration;
-use topspin::calib::camera::CameraCalib;
-use topspin::logo::pipeline::views;
-use topspin::logo::{
+use topspin_core::calib::Calibration;
+use topspin_core::calib::camera::CameraCalib;
+use topspin_core::logo::pipeline::views;
+use topspin_core::logo::{
     BallReference, CropImage, CropInput, DetectorConfig, LogoSample, RotationFitConfig, detect, fit_rotation,
 };
-use topspin::render::{BallColour, Scene, Sequence, SequenceOptions, render_sequence};
-use topspin::sim::{Setting, TrackerModel, simulate_ball};
+use topspin_sim::render::{BallColour, Scene, Sequence, SequenceOptions, render_sequence};
+use topspin_sim::{Setting, TrackerModel, simulate_ball};
 
 /// The first filmed topspin-medium ball of seed 1.
 fn sequence(cam: &CameraCalib) -> Sequence {

@@ -2,12 +2,12 @@
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use std::hint::black_box;
-use topspin::calib::Calibration;
-use topspin::physics::Vec3;
-use topspin::plan::{EulerZyx, StrikePlan};
-use topspin::rsi::codec::{KukaPose, RobElement, RobFrame, SenFrame};
-use topspin::rsi::session::{MAX_ANSWER_LEN, RsiSession, SessionConfig};
-use topspin::time::Instant;
+use topspin_core::calib::Calibration;
+use topspin_core::physics::Vec3;
+use topspin_core::plan::{EulerZyx, StrikePlan};
+use topspin_core::rsi::codec::{KukaPose, RobElement, RobFrame, SenFrame};
+use topspin_core::rsi::session::{MAX_ANSWER_LEN, RsiSession, SessionConfig};
+use topspin_core::time::Instant;
 
 fn request(ipoc: u64, buf: &mut [u8]) -> usize {
     let home = KukaPose::from_array([350.0, 0.0, 450.0, 180.0, 0.0, 0.0]);

@@ -3,7 +3,7 @@
 
 use std::path::{Path, PathBuf};
 
-use topspin::config::{ConfigError, Core, DaemonConfig, RsiWait};
+use topspin_daemon::config::{ConfigError, Core, DaemonConfig, RsiWait};
 
 fn env(pairs: &[(&str, &str)]) -> Vec<(String, String)> {
     pairs.iter().map(|(k, v)| (k.to_string(), v.to_string())).collect()

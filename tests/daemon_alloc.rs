@@ -7,9 +7,9 @@ use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 
-use topspin::calib::Calibration;
-use topspin::demo::{DemoConfig, run};
-use topspin::runtime::daemon::THREAD_START_HOOK;
+use topspin_core::calib::Calibration;
+use topspin_sim::demo::{DemoConfig, run};
+use topspin_daemon::runtime::daemon::THREAD_START_HOOK;
 
 struct Counting;
 

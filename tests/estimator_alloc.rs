@@ -7,10 +7,10 @@ use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 
 use rand::{Rng, SeedableRng};
 use rand_distr::{Distribution, Normal};
-use topspin::calib::Calibration;
-use topspin::estimator::{Estimator, EstimatorConfig};
-use topspin::physics::{BallState, Event, StopAt, Vec3};
-use topspin::time::Instant;
+use topspin_core::calib::Calibration;
+use topspin_core::estimator::{Estimator, EstimatorConfig};
+use topspin_core::physics::{BallState, Event, StopAt, Vec3};
+use topspin_core::time::Instant;
 
 struct Counting;
 

@@ -7,7 +7,7 @@
 use std::path::PathBuf;
 use std::process::Command;
 
-use topspin::eval::paper::flights::SpinMethod;
+use topspin_lab::eval::paper::flights::SpinMethod;
 
 const BIN: &str = env!("CARGO_BIN_EXE_topspin");
 

@@ -1,6 +1,10 @@
 //! The committed logo CNN on ONNX Runtime, loaded at run time from the
 //! shared library of the PyPI wheel `onnxruntime` (README, Setup):
 //! `ORT_DYLIB_PATH`, or else the wheel that `python3` imports.
+//!
+//! The library is an optional system part: where it is absent the test says
+//! so on stderr and passes, unless `TOPSPIN_REQUIRE_ONNXRUNTIME=1` (set by
+//! `.ci/run`, which installs the wheel) turns the skip into a failure.
 
 mod common;
 
@@ -23,13 +27,18 @@ fn onnxruntime_library() -> Option<PathBuf> {
 
 #[test]
 fn the_committed_model_runs_on_onnxruntime() {
-    let lib = onnxruntime_library().expect(
-        "no ONNX Runtime library: `python3 -m pip install onnxruntime==1.31.1` (README, Setup) or set ORT_DYLIB_PATH",
-    );
+    let Some(lib) = onnxruntime_library() else {
+        let note = "no ONNX Runtime library: `python3 -m pip install onnxruntime==1.31.1` (README, Setup) or set ORT_DYLIB_PATH";
+        if std::env::var_os("TOPSPIN_REQUIRE_ONNXRUNTIME").is_some_and(|v| v == "1") {
+            panic!("{note} (TOPSPIN_REQUIRE_ONNXRUNTIME=1)");
+        }
+        eprintln!("SKIPPED the_committed_model_runs_on_onnxruntime: {note}");
+        return;
+    };
     // SAFETY: this test binary has one test; nothing else runs yet.
     #[allow(unsafe_code)]
     unsafe {
         std::env::set_var("ORT_DYLIB_PATH", &lib)
     };
-    common::logo_cnn::check(topspin::logo::cnn::Backend::OnnxRuntime);
+    common::logo_cnn::check(topspin_core::logo::cnn::Backend::OnnxRuntime);
 }

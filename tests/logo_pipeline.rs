@@ -2,11 +2,11 @@
 //! within a few degrees of the truth, the segment correction helping on
 //! cut logos, the rotation fit on the true positions exact.
 
-use topspin::calib::Calibration;
-use topspin::calib::camera::CameraCalib;
-use topspin::logo::eval::{EvalOptions, evaluate, spin_errors, summarise};
-use topspin::render::BallColour;
-use topspin::sim::Setting;
+use topspin_core::calib::Calibration;
+use topspin_core::calib::camera::CameraCalib;
+use topspin_lab::logo::eval::{EvalOptions, evaluate, spin_errors, summarise};
+use topspin_sim::render::BallColour;
+use topspin_sim::Setting;
 
 #[test]
 fn rendered_balls_are_read_to_a_few_degrees() {

@@ -8,11 +8,11 @@
 
 use std::path::Path;
 
-use topspin::data::calibrate::{CalibrationSetup, calibrate, split_even_odd};
-use topspin::data::eval::{CubicBaseline, EvalConfig, evaluate, prepare};
-use topspin::data::frame::{BALL_RADIUS, BounceSearch, MPI_LAB_TO_TABLE, detect_bounces, estimate_frame};
-use topspin::data::mpi::{RealTrajectory, SETS, load, locate, sampling_stats};
-use topspin::physics::{PhysicsParams, Propagator, Table};
+use topspin_lab::data::calibrate::{CalibrationSetup, calibrate, split_even_odd};
+use topspin_lab::data::eval::{CubicBaseline, EvalConfig, evaluate, prepare};
+use topspin_lab::data::frame::{BALL_RADIUS, BounceSearch, MPI_LAB_TO_TABLE, detect_bounces, estimate_frame};
+use topspin_lab::data::mpi::{RealTrajectory, SETS, load, locate, sampling_stats};
+use topspin_core::physics::{PhysicsParams, Propagator, Table};
 
 fn data() -> Option<Vec<RealTrajectory>> {
     let Some(dir) = locate(Path::new(env!("CARGO_MANIFEST_DIR"))) else {
@@ -147,8 +147,8 @@ fn calibration_of_drag_and_bounce_does_not_hurt_validation() {
 #[test]
 #[ignore = "prints the report for docs/real-data.md"]
 fn report_for_the_docs() {
-    use topspin::data::calibrate::{CalibParam, Objective};
-    use topspin::data::frame::LabToTable;
+    use topspin_lab::data::calibrate::{CalibParam, Objective};
+    use topspin_lab::data::frame::LabToTable;
     let Some(trajs) = data() else { return };
     let prepared = prepare(&trajs, &MPI_LAB_TO_TABLE);
     for horizon in [0.2, 0.3] {
@@ -184,7 +184,7 @@ fn report_for_the_docs() {
             r.train,
             r.validation
         );
-        let all = topspin::data::calibrate::evaluate_with(
+        let all = topspin_lab::data::calibrate::evaluate_with(
             &prepared,
             &|_: &PhysicsParams| CubicBaseline,
             &paper_cfg(),
@@ -207,9 +207,9 @@ fn report_for_the_docs() {
 /// zero, and the cubic baseline), under the shipped physics. Loose bounds.
 #[test]
 fn fitted_spin_beats_no_spin_on_the_spin_sets() {
-    use topspin::calib::Calibration;
-    use topspin::data::spin::FitPredictor;
-    use topspin::data::study::eval_config;
+    use topspin_core::calib::Calibration;
+    use topspin_lab::data::spin::FitPredictor;
+    use topspin_lab::data::study::eval_config;
     let Some(trajs) = data() else { return };
     let prepared = prepare(&trajs, &MPI_LAB_TO_TABLE);
     let p = Calibration::default_cell().physics;
@@ -219,7 +219,7 @@ fn fitted_spin_beats_no_spin_on_the_spin_sets() {
     let cubic = evaluate(&prepared, &CubicBaseline, &cfg);
     println!("refined fit:\n{spin}refined, spin 0:\n{no_spin}cubic, spin 0:\n{cubic}");
     for set in ["backspin", "topspin"] {
-        let g = |r: &topspin::data::eval::Report| r.sets.iter().find(|g| g.name == set).unwrap().clone();
+        let g = |r: &topspin_lab::data::eval::Report| r.sets.iter().find(|g| g.name == set).unwrap().clone();
         let (s, n, c) = (g(&spin), g(&no_spin), g(&cubic));
         assert!(s.bounce.count >= 3 && s.ahead.count >= 10, "{set}: {s:?}");
         assert!(s.bounce.median < 0.75 * n.bounce.median, "{set}: spin {} vs no spin {}", s.bounce, n.bounce);
@@ -231,7 +231,7 @@ fn fitted_spin_beats_no_spin_on_the_spin_sets() {
     let wy = |set: &str| {
         let mut v: Vec<f64> =
             spin.results.iter().filter(|r| r.set == set).filter_map(|r| r.prediction.map(|p| p.state.spin.y)).collect();
-        topspin::data::mpi::median(&mut v)
+        topspin_lab::data::mpi::median(&mut v)
     };
     assert!(wy("backspin") < -50.0 && wy("topspin") > 50.0, "{} {}", wy("backspin"), wy("topspin"));
     assert!(wy("robot_no_spin").abs() < 50.0, "{}", wy("robot_no_spin"));
@@ -243,7 +243,7 @@ fn fitted_spin_beats_no_spin_on_the_spin_sets() {
 /// the ignored test below).
 #[test]
 fn lift_calibration_smoke() {
-    use topspin::data::study::{LiftChoice, calibrate_lift};
+    use topspin_lab::data::study::{LiftChoice, calibrate_lift};
     let Some(trajs) = data() else { return };
     let prepared: Vec<_> = prepare(&trajs, &MPI_LAB_TO_TABLE).into_iter().filter(|t| t.index < 4).collect();
     let r = calibrate_lift(&prepared, &PhysicsParams::paper(), LiftChoice::Saturating, 8);
@@ -259,11 +259,11 @@ fn lift_calibration_smoke() {
 #[test]
 #[ignore = "the full calibration; slow"]
 fn full_lift_calibration() {
-    use topspin::data::study::{LiftChoice, calibrate_lift, calibration_markdown, objective};
+    use topspin_lab::data::study::{LiftChoice, calibrate_lift, calibration_markdown, objective};
     let Some(trajs) = data() else { return };
     let prepared = prepare(&trajs, &MPI_LAB_TO_TABLE);
     let (train, validation) = split_even_odd(&prepared);
-    let shipped = topspin::calib::Calibration::default_cell().physics;
+    let shipped = topspin_core::calib::Calibration::default_cell().physics;
     println!(
         "shipped calib/: objective train {:.1} mm, validation {:.1} mm",
         objective(&train, &shipped),

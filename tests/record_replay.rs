@@ -7,15 +7,15 @@ use std::net::SocketAddr;
 use std::path::Path;
 use std::process::{Command, Output};
 
-use topspin::calib::Calibration;
-use topspin::config::DaemonConfig;
-use topspin::estimator::{Estimator, EstimatorConfig};
-use topspin::eval::stream::{StreamSetup, simulate_stream};
-use topspin::ingest::Ingest;
-use topspin::plan::StrikePlan;
-use topspin::record::{Recorder, calib_files, read_session};
-use topspin::time::Instant;
-use topspin::wire::observation::{OBSERVATION_LEN, Observation};
+use topspin_core::calib::Calibration;
+use topspin_daemon::config::DaemonConfig;
+use topspin_core::estimator::{Estimator, EstimatorConfig};
+use topspin_lab::eval::stream::{StreamSetup, simulate_stream};
+use topspin_core::ingest::Ingest;
+use topspin_core::plan::StrikePlan;
+use topspin_daemon::record::{Recorder, calib_files, read_session};
+use topspin_core::time::Instant;
+use topspin_core::wire::observation::{OBSERVATION_LEN, Observation};
 
 const TRACKER: &str = "127.0.0.7:5555";
 

@@ -6,14 +6,14 @@
 #![allow(clippy::needless_range_loop)] // parallel per-axis arrays
 
 use proptest::prelude::*;
-use topspin::calib::Calibration;
-use topspin::motion::safety::SafetyFilter;
-use topspin::motion::{MotionLimits, Pose6};
-use topspin::physics::Vec3;
-use topspin::plan::{EulerZyx, StrikePlan};
-use topspin::rsi::codec::{KukaPose, RobElement, RobFrame, SenFrame};
-use topspin::rsi::session::{MAX_ANSWER_LEN, RsiSession, SessionConfig};
-use topspin::time::Instant;
+use topspin_core::calib::Calibration;
+use topspin_core::motion::safety::SafetyFilter;
+use topspin_core::motion::{MotionLimits, Pose6};
+use topspin_core::physics::Vec3;
+use topspin_core::plan::{EulerZyx, StrikePlan};
+use topspin_core::rsi::codec::{KukaPose, RobElement, RobFrame, SenFrame};
+use topspin_core::rsi::session::{MAX_ANSWER_LEN, RsiSession, SessionConfig};
+use topspin_core::time::Instant;
 
 fn hostile() -> impl Strategy<Value = f64> {
     prop_oneof![

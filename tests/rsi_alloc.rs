@@ -4,12 +4,12 @@
 use std::alloc::System;
 
 use stats_alloc::{INSTRUMENTED_SYSTEM, Region, StatsAlloc};
-use topspin::calib::Calibration;
-use topspin::physics::Vec3;
-use topspin::plan::{EulerZyx, StrikePlan};
-use topspin::rsi::codec::{KukaPose, RobElement, RobFrame};
-use topspin::rsi::session::{MAX_ANSWER_LEN, RsiSession, SessionConfig};
-use topspin::time::Instant;
+use topspin_core::calib::Calibration;
+use topspin_core::physics::Vec3;
+use topspin_core::plan::{EulerZyx, StrikePlan};
+use topspin_core::rsi::codec::{KukaPose, RobElement, RobFrame};
+use topspin_core::rsi::session::{MAX_ANSWER_LEN, RsiSession, SessionConfig};
+use topspin_core::time::Instant;
 
 #[global_allocator]
 static GLOBAL: &StatsAlloc<System> = &INSTRUMENTED_SYSTEM;

@@ -8,11 +8,11 @@
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
-use topspin::calib::Calibration;
-use topspin::mock_krc::{self, Faults, MockKrcConfig, MockResult};
-use topspin::rsi::server::{RsiServer, WaitStrategy, plan_slot};
-use topspin::rsi::session::{MAX_ANSWER_LEN, RsiSession, SessionConfig, SessionStats};
-use topspin::time::{Duration, Instant};
+use topspin_core::calib::Calibration;
+use topspin_sim::mock_krc::{self, Faults, MockKrcConfig, MockResult};
+use topspin_daemon::rsi_server::{RsiServer, WaitStrategy, plan_slot};
+use topspin_core::rsi::session::{MAX_ANSWER_LEN, RsiSession, SessionConfig, SessionStats};
+use topspin_core::time::{Duration, Instant};
 
 fn run_with(faults: Faults, late_limit: u64, cycles: u64) -> MockResult {
     let cal = Calibration::default_cell();

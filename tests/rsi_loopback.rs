@@ -26,15 +26,15 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use topspin::calib::Calibration;
-use topspin::mock_krc::{self, MockKrcConfig};
-use topspin::motion::MotionLimits;
-use topspin::physics::Vec3;
-use topspin::plan::{EulerZyx, StrikePlan};
-use topspin::rsi::server::{RsiServer, WaitStrategy, plan_slot};
-use topspin::rsi::session::{RsiSession, SessionConfig};
-use topspin::runtime;
-use topspin::time::{Duration, Instant};
+use topspin_core::calib::Calibration;
+use topspin_sim::mock_krc::{self, MockKrcConfig};
+use topspin_core::motion::MotionLimits;
+use topspin_core::physics::Vec3;
+use topspin_core::plan::{EulerZyx, StrikePlan};
+use topspin_daemon::rsi_server::{RsiServer, WaitStrategy, plan_slot};
+use topspin_core::rsi::session::{RsiSession, SessionConfig};
+use topspin_daemon::clock;
+use topspin_core::time::{Duration, Instant};
 
 fn env_u64(name: &str, default: u64) -> u64 {
     std::env::var(name).ok().and_then(|s| s.parse().ok()).unwrap_or(default)
@@ -53,7 +53,7 @@ fn ten_thousand_cycles_of_strikes() {
     let server_thread = std::thread::spawn(move || {
         server
             .run(&s2, &mut reader, |e| {
-                if let topspin::rsi::session::SessionEvent::PlanAccepted { seq, late_by, .. } = e
+                if let topspin_core::rsi::session::SessionEvent::PlanAccepted { seq, late_by, .. } = e
                     && late_by.0 > 0
                     && std::env::var("DBG").is_ok()
                 {
@@ -70,7 +70,7 @@ fn ten_thousand_cycles_of_strikes() {
     mcfg.bind = "127.0.0.1:0".parse().unwrap();
     mcfg.cycles = Some(n);
     mcfg.answer_deadline = Duration::from_millis(env_u64("TOPSPIN_TEST_DEADLINE_MS", 20));
-    let start = runtime::now();
+    let start = clock::now();
     let mock = mock_krc::spawn(mcfg.clone()).unwrap();
 
     // The strike stream: a ball every second, its plan refined every 4 ms
@@ -104,7 +104,7 @@ fn ten_thousand_cycles_of_strikes() {
         let commit = hit_time.0 - 80_000_000;
         let mut t = t_ball;
         loop {
-            runtime::sleep_until(t, Duration::from_micros(100));
+            clock::sleep_until(t, Duration::from_micros(100));
             seq += 1;
             let left = commit.saturating_sub(t.0) as f64 / (commit - t_ball.0) as f64;
             let mut p = fin;

@@ -13,6 +13,8 @@
 //! correction is a velocity step the mock's robot model smooths — that is
 //! lateness, tested in tests/rsi_faults.rs, not a command out of bounds.
 
+#![allow(clippy::disallowed_methods)] // a process test: it waits on the wall clock
+
 use std::io::{BufRead, BufReader};
 use std::net::UdpSocket;
 use std::path::{Path, PathBuf};
@@ -20,7 +22,7 @@ use std::process::{Child, Command, Stdio};
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
-use topspin::calib::Calibration;
+use topspin_core::calib::Calibration;
 
 const BIN: &str = env!("CARGO_BIN_EXE_topspin");
 
@@ -213,7 +215,7 @@ fn sigkill_mid_stroke_keeps_the_recording_and_a_restart_resumes() {
     // The killed file opens and holds what was flushed.
     let files = recordings(&dir);
     assert_eq!(files.len(), 1, "{files:?}");
-    let killed = topspin::record::read_session(&files[0]).expect("a killed recording still opens");
+    let killed = topspin_daemon::record::read_session(&files[0]).expect("a killed recording still opens");
     assert!(killed.truncated.is_some(), "a killed file cannot have its summary");
     assert!(!killed.observations.is_empty() && !killed.exchanges.is_empty(), "nothing flushed was kept");
     let replay = Command::new(BIN).arg("replay").arg(&files[0]).output().unwrap();
@@ -235,7 +237,7 @@ fn sigkill_mid_stroke_keeps_the_recording_and_a_restart_resumes() {
     assert_eq!(get(&summary2, "poscorr_clamped"), "0", "{summary2:?}");
     let files = recordings(&dir);
     assert_eq!(files.len(), 2, "the restart must not overwrite the killed recording: {files:?}");
-    let complete = files.iter().map(|f| topspin::record::read_session(f).unwrap()).find(|s| s.truncated.is_none());
+    let complete = files.iter().map(|f| topspin_daemon::record::read_session(f).unwrap()).find(|s| s.truncated.is_none());
     assert!(complete.is_some(), "the restarted daemon's recording is complete");
     let _ = std::fs::remove_dir_all(&dir);
 }

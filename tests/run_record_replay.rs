@@ -3,6 +3,8 @@
 //! ends it cleanly (exit 0) and `topspin replay` reproduces every plan of
 //! the recording bit for bit.
 
+#![allow(clippy::disallowed_methods)] // a process test: it waits on the wall clock
+
 use std::net::UdpSocket;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};

@@ -1,12 +1,14 @@
 //! `topspin sim` end to end: files on disk, the live UDP stream on
 //! loopback, and the exit code for unusable input.
 
+#![allow(clippy::disallowed_methods)] // a process test: it waits on the wall clock
+
 use std::net::UdpSocket;
 use std::path::PathBuf;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use topspin::wire::observation::Observation;
+use topspin_core::wire::observation::Observation;
 
 const BIN: &str = env!("CARGO_BIN_EXE_topspin");
 

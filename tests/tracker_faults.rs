@@ -10,10 +10,10 @@
 //! that the shared machine's scheduling noise is not counted as the
 //! daemon's lateness; a missing answer still counts.
 
-use topspin::calib::Calibration;
-use topspin::demo::{DemoConfig, run};
-use topspin::sim::faults::TrackerFaults;
-use topspin::time::Duration;
+use topspin_core::calib::Calibration;
+use topspin_sim::demo::{DemoConfig, run};
+use topspin_sim::faults::TrackerFaults;
+use topspin_core::time::Duration;
 
 #[test]
 fn every_tracker_fault_at_once_is_survived_within_limits() {

@@ -13,6 +13,8 @@
 //! No timing is asserted: the mock's answer deadline is stretched as in
 //! `tests/demo.rs`, and the verdicts are not checked here.
 
+#![allow(clippy::disallowed_methods)] // a process test: it waits on the wall clock
+
 use std::collections::BTreeMap;
 use std::net::{SocketAddr, TcpListener};
 use std::sync::Arc;
@@ -20,13 +22,14 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use foxglove::Decode;
 use foxglove::messages::{FrameTransform, PosesInFrame, SceneUpdate};
-use topspin::calib::Calibration;
-use topspin::demo::{DemoConfig, run};
-use topspin::record::replay::replay_session;
-use topspin::record::{TOPIC_COUNTERS, TOPIC_DATAGRAM, TOPIC_PLAN, TOPIC_RSI, read_session};
-use topspin::time::Duration;
-use topspin::viewer::replay::view_session;
-use topspin::viewer::{LiveServer, TOPICS, Topic, ViewerSink, probe};
+use topspin_core::calib::Calibration;
+use topspin_sim::demo::{DemoConfig, run};
+use topspin_daemon::record::replay::replay_session;
+use topspin_daemon::record::{TOPIC_COUNTERS, TOPIC_DATAGRAM, TOPIC_PLAN, TOPIC_RSI, read_session};
+use topspin_core::time::Duration;
+use topspin_daemon::viewer::replay::view_session;
+use topspin_daemon::viewer::{LiveServer, TOPICS, Topic, ViewerSink};
+use topspin_sim::probe;
 
 /// 2020-01-01 in Unix ns: log times are wall clock, not the monotonic clock.
 const WALL_CLOCK_AFTER: u64 = 1_577_836_800_000_000_000;

@@ -6,8 +6,8 @@
 use std::path::Path;
 
 use libfuzzer_sys::fuzz_target;
-use topspin::calib::Calibration;
-use topspin::calib::camera::CameraCalib;
+use topspin_core::calib::Calibration;
+use topspin_core::calib::camera::CameraCalib;
 
 const FILES: [&str; 4] = [
     include_str!("../../calib/physics.toml"),

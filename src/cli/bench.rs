@@ -10,10 +10,10 @@ use clap::{Args, Subcommand};
 use serde_json::json;
 
 use super::BadInput;
-use crate::calib::Calibration;
-use crate::demo::{DemoConfig, Latencies, run_loopback};
-use crate::rsi::server::WaitStrategy;
-use crate::viewer::probe;
+use topspin_core::calib::Calibration;
+use topspin_sim::demo::{DemoConfig, Latencies, run_loopback};
+use topspin_daemon::rsi_server::WaitStrategy;
+use topspin_sim::probe;
 
 #[derive(Debug, Subcommand)]
 pub enum BenchCommand {
@@ -39,7 +39,7 @@ pub struct LatencyArgs {
     pub json: bool,
     /// Serve the live Foxglove view on ADDR meanwhile (default 127.0.0.1:8765),
     /// with a built-in client subscribed to every channel (as Foxglove would be).
-    #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = crate::viewer::DEFAULT_LIVE_ADDR)]
+    #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = topspin_daemon::viewer::DEFAULT_LIVE_ADDR)]
     pub live: Option<std::net::SocketAddr>,
     /// With --live: no built-in client (the server idles unless Foxglove connects).
     #[arg(long)]
@@ -77,7 +77,7 @@ fn latency(a: LatencyArgs) -> anyhow::Result<()> {
             if addr.port() == 0 {
                 return Err(BadInput("--live needs a port for the built-in client (or --no-live-client)".into()).into());
             }
-            cfg.live_wait = crate::time::Duration::from_millis(10_000);
+            cfg.live_wait = topspin_core::time::Duration::from_millis(10_000);
             Some(probe::spawn(addr, probe_stop.clone(), std::time::Duration::from_secs(10)))
         }
         _ => None,

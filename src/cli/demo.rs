@@ -4,9 +4,9 @@
 use clap::Args;
 
 use super::BadInput;
-use crate::calib::Calibration;
-use crate::demo::{DemoConfig, DemoReport, HIT_RADIUS, HIT_WINDOW, run as run_demo};
-use crate::sim::TrackerModel;
+use topspin_core::calib::Calibration;
+use topspin_sim::demo::{DemoConfig, DemoReport, HIT_RADIUS, HIT_WINDOW, run as run_demo};
+use topspin_sim::TrackerModel;
 
 #[derive(Debug, Args)]
 pub struct DemoArgs {
@@ -35,12 +35,12 @@ pub struct DemoArgs {
     /// Simulate the ceiling camera too and run the logo thread: `cnn` or
     /// `background`; its spins are fused into the estimator's.
     #[arg(long, value_name = "METHOD")]
-    pub logo: Option<crate::config::LogoMethodConfig>,
+    pub logo: Option<topspin_daemon::config::LogoMethodConfig>,
     /// --logo cnn: the network.
     #[command(flatten)]
     pub cnn: super::logo_cnn::CnnArgs,
     /// Serve the live Foxglove view (WebSocket) on ADDR (default 127.0.0.1:8765).
-    #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = crate::viewer::DEFAULT_LIVE_ADDR)]
+    #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = topspin_daemon::viewer::DEFAULT_LIVE_ADDR)]
     pub live: Option<std::net::SocketAddr>,
     /// With --live: wait up to this long (s) for Foxglove to connect before the first ball.
     #[arg(long, default_value_t = 0.0)]
@@ -73,20 +73,20 @@ pub fn run(a: DemoArgs) -> anyhow::Result<()> {
         return Err(BadInput(format!("--gap {} must be positive", a.gap)).into());
     }
     let cal = Calibration::default_cell();
-    let mut runtime = crate::runtime::daemon::RuntimeConfig::loopback();
+    let mut runtime = topspin_daemon::runtime::daemon::RuntimeConfig::loopback();
     if let Some(method) = a.logo {
-        runtime.logo = Some(crate::runtime::daemon::LogoRuntime {
+        runtime.logo = Some(topspin_daemon::runtime::daemon::LogoRuntime {
             bind: "127.0.0.1:0".parse().expect("literal"),
             source: Some([127, 0, 0, 1].into()),
             method: match method {
-                crate::config::LogoMethodConfig::Cnn => crate::runtime::daemon::LogoMethodChoice::Cnn {
+                topspin_daemon::config::LogoMethodConfig::Cnn => topspin_daemon::runtime::daemon::LogoMethodChoice::Cnn {
                     model: a.cnn.model_path(),
                     backend: a.cnn.backend.clone(),
                 },
-                crate::config::LogoMethodConfig::Background => crate::runtime::daemon::LogoMethodChoice::Background,
+                topspin_daemon::config::LogoMethodConfig::Background => topspin_daemon::runtime::daemon::LogoMethodChoice::Background,
             },
-            camera: crate::calib::camera::CameraCalib::default_camera(),
-            camera_latency: crate::time::Duration(0),
+            camera: topspin_core::calib::camera::CameraCalib::default_camera(),
+            camera_latency: topspin_core::time::Duration(0),
             thread: Default::default(),
         });
     }
@@ -96,12 +96,12 @@ pub fn run(a: DemoArgs) -> anyhow::Result<()> {
         seed: a.seed,
         tracker: TrackerModel { noise_sigma: a.noise_mm * 1e-3, dropout: a.dropout, ..TrackerModel::default() },
         gap: a.gap,
-        answer_deadline: a.answer_deadline_ms.map(crate::time::Duration::from_millis),
+        answer_deadline: a.answer_deadline_ms.map(topspin_core::time::Duration::from_millis),
         live: a.live,
-        live_wait: crate::time::Duration::from_nanos((a.live_wait.max(0.0) * 1e9) as u64),
+        live_wait: topspin_core::time::Duration::from_nanos((a.live_wait.max(0.0) * 1e9) as u64),
         record: a.record.clone(),
         late_limit: a.late_limit,
-        tracker_faults: a.tracker_faults.then(crate::sim::faults::TrackerFaults::all),
+        tracker_faults: a.tracker_faults.then(topspin_sim::faults::TrackerFaults::all),
     };
     if !a.json {
         eprintln!(

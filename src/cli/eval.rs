@@ -9,11 +9,11 @@ use clap::{Args, Subcommand};
 
 use super::BadInput;
 use super::fit::{PhysicsChoice, load_calibration};
-use crate::eval::fit::{MethodRow, Window, accuracy, outlier_experiment};
-use crate::eval::simulate_set;
-use crate::eval::stats::Summary;
-use crate::eval::stream::{StreamSetup, evaluate};
-use crate::sim::TrackerModel;
+use topspin_lab::eval::fit::{MethodRow, Window, accuracy, outlier_experiment};
+use topspin_sim::simulate_set;
+use topspin_core::stats::Summary;
+use topspin_lab::eval::stream::{StreamSetup, evaluate};
+use topspin_sim::TrackerModel;
 
 #[derive(Debug, Subcommand)]
 pub enum EvalCommand {

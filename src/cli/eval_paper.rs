@@ -4,26 +4,25 @@
 //!
 //! The CNN (`--model`, `--backend`; `--no-cnn` leaves it out) and the
 //! fused estimate (`--fuse-logo`) plug in through
-//! [`crate::eval::paper::Extensions`] as [`crate::eval::paper::plug`]'s
+//! [`topspin_lab::eval::paper::Extensions`] as [`topspin_lab::eval::paper::plug`]'s
 //! predictor and fusion.
 
 use std::path::{Path, PathBuf};
-use std::time::{Duration, Instant};
 
 use clap::Args;
-use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 use super::BadInput;
 use super::fit::{PhysicsChoice, load_calibration};
-use crate::calib::Calibration;
-use crate::calib::camera::CameraCalib;
-use crate::data::eval::prepare;
-use crate::data::frame::MPI_LAB_TO_TABLE;
-use crate::data::mpi::{load, locate};
-use crate::demo::{DemoConfig, run_loopback};
-use crate::eval::paper::plug::{CnnPredictor, FusedLogo, TrajectoryLogoFusion};
-use crate::eval::paper::report::{Histogram, LatencyRun, PaperReport, markdown};
-use crate::eval::paper::{Extensions, PaperConfig, Progress, figures, run_tables};
+use topspin_core::calib::Calibration;
+use topspin_core::calib::camera::CameraCalib;
+use topspin_lab::data::eval::prepare;
+use topspin_lab::data::frame::MPI_LAB_TO_TABLE;
+use topspin_lab::data::mpi::{load, locate};
+use topspin_sim::demo::{DemoConfig, run_loopback};
+use topspin_lab::eval::paper::plug::{CnnPredictor, FusedLogo, TrajectoryLogoFusion};
+use topspin_lab::eval::paper::report::{Histogram, LatencyRun, PaperReport, markdown};
+use topspin_lab::eval::paper::{Extensions, PaperConfig, Progress, figures, run_tables};
+use topspin_lab::progress::{StageBar, worker_threads};
 
 #[derive(Debug, Args)]
 pub struct EvalPaperArgs {
@@ -69,39 +68,6 @@ pub struct EvalPaperArgs {
     pub fuse_logo: FusedLogo,
 }
 
-/// An indicatif bar per stage.
-struct Bar {
-    bar: ProgressBar,
-}
-
-impl Bar {
-    fn new(quiet: bool) -> Self {
-        let bar = ProgressBar::with_draw_target(
-            Some(0),
-            if quiet { ProgressDrawTarget::hidden() } else { ProgressDrawTarget::stderr() },
-        );
-        bar.set_style(
-            ProgressStyle::with_template("{msg:45} [{bar:30}] {pos}/{len} {elapsed_precise} eta {eta}")
-                .expect("valid template")
-                .progress_chars("=> "),
-        );
-        bar.enable_steady_tick(Duration::from_millis(500));
-        Bar { bar }
-    }
-}
-
-impl Progress for Bar {
-    fn stage(&self, name: &str, total: u64) {
-        self.bar.set_message(name.to_owned());
-        self.bar.set_length(total);
-        self.bar.set_position(0);
-        self.bar.reset_eta();
-    }
-    fn inc(&self, n: u64) {
-        self.bar.inc(n);
-    }
-}
-
 fn load_average() -> String {
     std::fs::read_to_string("/proc/loadavg")
         .ok()
@@ -142,14 +108,14 @@ fn data_dir(explicit: Option<&Path>) -> Option<PathBuf> {
 }
 
 pub fn run_paper(a: EvalPaperArgs) -> anyhow::Result<()> {
-    let started = Instant::now();
+    let started = topspin_daemon::clock::now();
     if !(a.noise_mm.is_finite() && a.noise_mm > 0.0) {
         return Err(BadInput(format!("--noise-mm {} must be positive", a.noise_mm)).into());
     }
-    if a.flights < 2 || a.bounce_balls < 1 || a.frames < crate::logo::eval::MIN_FRAMES {
+    if a.flights < 2 || a.bounce_balls < 1 || a.frames < topspin_lab::logo::eval::MIN_FRAMES {
         return Err(BadInput(format!(
             "need --flights ≥ 2, --bounce-balls ≥ 1 and --frames ≥ {}",
-            crate::logo::eval::MIN_FRAMES
+            topspin_lab::logo::eval::MIN_FRAMES
         ))
         .into());
     }
@@ -188,11 +154,11 @@ pub fn run_paper(a: EvalPaperArgs) -> anyhow::Result<()> {
     };
     let mut fusion = TrajectoryLogoFusion::new(a.fuse_logo);
     let load_before = load_average();
-    let bar = Bar::new(a.quiet);
-    let epoch = Instant::now();
-    let clock = move || epoch.elapsed().as_secs_f64();
+    let bar = StageBar::new(a.quiet);
+    let epoch = topspin_daemon::clock::now();
+    let clock = move || topspin_daemon::clock::secs_since(epoch);
     let ext = Extensions {
-        cnn: cnn.as_mut().map(|c| c as &mut dyn crate::eval::paper::flights::CropPredictor),
+        cnn: cnn.as_mut().map(|c| c as &mut dyn topspin_lab::eval::paper::flights::CropPredictor),
         fusion: Some(&mut fusion),
     };
     let mut tables = run_tables(&cal, &cam, &cfg, real.as_deref(), ext, &bar, &clock);
@@ -201,27 +167,27 @@ pub fn run_paper(a: EvalPaperArgs) -> anyhow::Result<()> {
     }
     let latency = if a.latency_s > 0.0 {
         bar.stage(&format!("latency bench ({} s)", a.latency_s), 1);
-        let t0 = Instant::now();
+        let t0 = topspin_daemon::clock::now();
         let l = latency_run(a.latency_s.max(2.0), &Calibration::default_cell())?;
         bar.inc(1);
-        tables.stage_seconds.push(("latency bench".into(), t0.elapsed().as_secs_f64()));
+        tables.stage_seconds.push(("latency bench".into(), topspin_daemon::clock::secs_since(t0)));
         Some(l)
     } else {
         None
     };
     bar.stage("figures", 1);
-    let t0 = Instant::now();
+    let t0 = topspin_daemon::clock::now();
     let figs = figures(&cal, &cam, &cfg, &tables.set, latency.as_ref())?;
     for (name, svg) in &figs {
         std::fs::write(a.out.join(name), svg)?;
     }
-    tables.stage_seconds.push(("figures".into(), t0.elapsed().as_secs_f64()));
+    tables.stage_seconds.push(("figures".into(), topspin_daemon::clock::secs_since(t0)));
     bar.inc(1);
-    bar.bar.finish_and_clear();
+    bar.finish();
     let cores = std::thread::available_parallelism().map_or(0, |n| n.get());
     let machine = format!(
         "{cores} cores, {} rayon threads, load average {load_before} at the start and {} at the end (a shared machine)",
-        rayon::current_num_threads(),
+        worker_threads(),
         load_average()
     );
     let mut command = format!(
@@ -242,7 +208,7 @@ pub fn run_paper(a: EvalPaperArgs) -> anyhow::Result<()> {
         if let Some(m) = &a.cnn.model {
             command += &format!(" --model {}", m.display());
         }
-        if a.cnn.backend != crate::logo::cnn::Backend::Auto {
+        if a.cnn.backend != topspin_core::logo::cnn::Backend::Auto {
             command += &format!(" --backend {}", a.cnn.backend.name());
         }
     }
@@ -268,7 +234,7 @@ pub fn run_paper(a: EvalPaperArgs) -> anyhow::Result<()> {
         latency,
         figures: figs.into_iter().map(|f| f.0).collect(),
         stage_seconds: tables.stage_seconds,
-        wall_seconds: started.elapsed().as_secs_f64(),
+        wall_seconds: topspin_daemon::clock::secs_since(started),
         machine,
     };
     let md = markdown(&report);

@@ -5,22 +5,21 @@
 //! and μ is rerun (a minute or two) and its results are compared too.
 
 use std::path::{Path, PathBuf};
-use std::time::Instant;
 
 use clap::Args;
 use serde_json::json;
 
 use super::BadInput;
 use super::fit::{PhysicsChoice, load_calibration};
-use crate::data::eval::prepare;
-use crate::data::frame::MPI_LAB_TO_TABLE;
-use crate::data::mpi::{DATA_ENV, load, locate};
-use crate::data::spin::SpinFit;
-use crate::data::study::{
+use topspin_lab::data::eval::prepare;
+use topspin_lab::data::frame::MPI_LAB_TO_TABLE;
+use topspin_lab::data::mpi::{DATA_ENV, load, locate};
+use topspin_lab::data::spin::SpinFit;
+use topspin_lab::data::study::{
     LiftChoice, PREDICTORS, Variant, Which, calibrate_lift, calibration_markdown, compare, markdown, params_json,
     rows_json, spin_markdown, spin_summary,
 };
-use crate::physics::PhysicsParams;
+use topspin_core::physics::PhysicsParams;
 
 #[derive(Debug, Args)]
 pub struct EvalRealArgs {
@@ -63,7 +62,7 @@ fn data_dir(explicit: Option<&Path>) -> Result<PathBuf, BadInput> {
 }
 
 pub fn run_real(a: EvalRealArgs) -> anyhow::Result<()> {
-    let started = Instant::now();
+    let started = topspin_daemon::clock::now();
     let dir = data_dir(a.data.as_deref())?;
     let trajs = load(&dir).map_err(|e| BadInput(e.to_string()))?;
     let prepared = prepare(&trajs, &MPI_LAB_TO_TABLE);
@@ -91,7 +90,7 @@ pub fn run_real(a: EvalRealArgs) -> anyhow::Result<()> {
         .find(|r| r.predictor == Which::Fit(SpinFit::Refined) && r.physics != "paper")
         .or_else(|| rows.iter().find(|r| r.predictor == Which::Fit(SpinFit::Refined)));
     let spins = spin_row.map(|r| (r.physics.clone(), spin_summary(&prepared, &r.predictions)));
-    let elapsed = started.elapsed().as_secs_f64();
+    let elapsed = topspin_daemon::clock::secs_since(started);
 
     if a.json {
         let out = json!({

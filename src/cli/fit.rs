@@ -6,9 +6,9 @@ use clap::{Args, ValueEnum};
 use serde_json::{Value, json};
 
 use super::BadInput;
-use crate::calib::Calibration;
-use crate::fit::{FitConfig, Method, Sample, TrajectoryFit, fit_trajectory};
-use crate::physics::{Vec3, rad_to_rps};
+use topspin_core::calib::Calibration;
+use topspin_core::fit::{FitConfig, Method, Sample, TrajectoryFit, fit_trajectory};
+use topspin_core::physics::{Vec3, rad_to_rps};
 
 /// Which physics coefficients to use.
 #[derive(Copy, Clone, Debug, PartialEq, Eq, ValueEnum)]

@@ -16,15 +16,15 @@ use std::path::{Path, PathBuf};
 use serde_json::json;
 
 use super::{BadInput, logo_cnn};
-use crate::calib::Calibration;
-use crate::calib::camera::CameraCalib;
-use crate::logo::ball::Circle;
-use crate::logo::eval::{self, BallEval, EvalOptions, Row};
-use crate::logo::pipeline::{CropInput, LogoMethod, process_sequence};
-use crate::logo::{CropImage, DetectorConfig, GapRule, RotationFitConfig};
-use crate::physics::rad_to_rps;
-use crate::render::{BallColour, crop_origin};
-use crate::sim::Setting;
+use topspin_core::calib::Calibration;
+use topspin_core::calib::camera::CameraCalib;
+use topspin_core::logo::ball::Circle;
+use topspin_lab::logo::eval::{self, BallEval, EvalOptions, Row};
+use topspin_core::logo::pipeline::{CropInput, LogoMethod, process_sequence};
+use topspin_core::logo::{CropImage, DetectorConfig, GapRule, RotationFitConfig};
+use topspin_core::physics::rad_to_rps;
+use topspin_sim::render::{BallColour, crop_origin};
+use topspin_sim::Setting;
 
 #[derive(Debug, clap::Args)]
 pub struct LogoArgs {

@@ -6,7 +6,7 @@
 //!   error of the orientation and vector angle of the logo (on crops whose
 //!   logo faces the camera), and the time per crop and per batch of 5.
 //! - `--compare`: trajectory, background, CNN and fused spins on the same
-//!   simulated flights ([`crate::logo::compare`]).
+//!   simulated flights ([`topspin_lab::logo::compare`]).
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -15,15 +15,15 @@ use serde_json::json;
 
 use super::BadInput;
 use super::logo::{FolderFrame, read_png};
-use crate::calib::Calibration;
-use crate::calib::camera::CameraCalib;
-use crate::eval::stats::Summary;
-use crate::logo::cnn::{self, CnnOutput, LogoCnn, geodesic_deg, swing_to};
-use crate::logo::compare::{self, CompareBall, CompareOptions, CompareRow, SOURCES};
-use crate::logo::rotation::RotationFitConfig;
-use crate::physics::{Vec3, rad_to_rps};
-use crate::render::BallColour;
-use crate::sim::Setting;
+use topspin_core::calib::Calibration;
+use topspin_core::calib::camera::CameraCalib;
+use topspin_core::stats::Summary;
+use topspin_core::logo::cnn::{self, CnnOutput, LogoCnn, geodesic_deg, swing_to};
+use topspin_lab::logo::compare::{self, CompareBall, CompareOptions, CompareRow, SOURCES};
+use topspin_core::logo::rotation::RotationFitConfig;
+use topspin_core::physics::{Vec3, rad_to_rps};
+use topspin_sim::render::BallColour;
+use topspin_sim::Setting;
 
 fn bad(msg: impl Into<String>) -> anyhow::Error {
     BadInput(msg.into()).into()
@@ -116,13 +116,13 @@ pub fn run_cnn_eval(dir: &Path, net: &mut LogoCnn, as_json: bool) -> anyhow::Res
     let (mut t1, mut t5) = (Vec::new(), Vec::new());
     for i in 0..60 {
         let k = (i * 7) % crops.len().saturating_sub(cnn::MAX_BATCH).max(1);
-        let t = std::time::Instant::now();
+        let t = topspin_daemon::clock::now();
         net.infer(&crops[k..k + 1], &mut one).map_err(|e| bad(e.to_string()))?;
-        t1.push(t.elapsed().as_secs_f64());
+        t1.push(topspin_daemon::clock::secs_since(t));
         if crops.len() >= cnn::MAX_BATCH {
-            let t = std::time::Instant::now();
+            let t = topspin_daemon::clock::now();
             net.infer(&crops[k..k + cnn::MAX_BATCH], &mut five).map_err(|e| bad(e.to_string()))?;
-            t5.push(t.elapsed().as_secs_f64());
+            t5.push(topspin_daemon::clock::secs_since(t));
         }
     }
     let (g, v) = (Summary::of(&geo), Summary::of(&vec));

@@ -8,10 +8,10 @@ use anyhow::Context;
 use clap::Args;
 
 use super::BadInput;
-use crate::calib::Calibration;
-use crate::mock_krc::config::{ContextConfig, DEFAULT_CONTEXT_XML, DEFAULT_ETHERNET_XML, EthernetConfig};
-use crate::mock_krc::{CorrMode, Faults, MockKrcConfig};
-use crate::time::Duration;
+use topspin_core::calib::Calibration;
+use topspin_sim::mock_krc::config::{ContextConfig, DEFAULT_CONTEXT_XML, DEFAULT_ETHERNET_XML, EthernetConfig};
+use topspin_sim::mock_krc::{CorrMode, Faults, MockKrcConfig};
+use topspin_core::time::Duration;
 
 #[derive(Debug, Args)]
 pub struct MockKrcArgs {
@@ -107,7 +107,7 @@ pub fn run(a: MockKrcArgs) -> anyhow::Result<()> {
         a.cycle_ms, cfg.sensor, a.mode, eth.sentype
     );
     let stop = AtomicBool::new(false);
-    let r = crate::mock_krc::run(&cfg, &stop).context("mock KR C4")?;
+    let r = topspin_sim::mock_krc::run(&cfg, &stop).context("mock KR C4")?;
     println!(
         "cycles {} late {} stopped_by_limit {} stopped_by_monitor {} wrong_ipoc {} poscorr_clamped {} robot_limited {} max_answer_delay_us {}",
         r.cycles,

@@ -1,5 +1,5 @@
 //! `topspin render`: labelled synthetic ceiling-camera crops of simulated
-//! launcher balls ([`crate::render`]), written as PNG + CSV (`--out DIR`)
+//! launcher balls ([`topspin_sim::render`]), written as PNG + CSV (`--out DIR`)
 //! and/or streamed live as TTI1 datagrams (`--to ADDR`). Deterministic in
 //! `--seed`; only the pacing of the stream follows the wall clock.
 //!
@@ -15,7 +15,7 @@
 //! the logo's centre on the unit sphere and the orientation (body → camera
 //! quaternion; the logo is the body's +z) in the camera frame; the ball
 //! centre and the spin in the table frame; `view_*` the logo's centre in
-//! the view frame of the measured circle ([`crate::logo::view`]: z towards
+//! the view frame of the measured circle ([`topspin_core::logo::view`]: z towards
 //! the camera, x along image u, y image up), the CNN's training target.
 
 use std::fmt::Write as _;
@@ -28,15 +28,15 @@ use serde_json::json;
 
 use super::BadInput;
 use super::logo::parse_colours;
-use crate::calib::Calibration;
-use crate::calib::camera::CameraCalib;
-use crate::logo::BallView;
-use crate::logo::eval::MIN_FRAMES;
-use crate::physics::{Vec3, rad_to_rps};
-use crate::render::{Conditions, Frame, Scene, Sequence, SequenceOptions, render_sequence};
-use crate::sim::{Setting, TrackerModel, simulate_ball};
-use crate::time::Instant;
-use crate::wire::crop::{CROP_MAX_LEN, Crop};
+use topspin_core::calib::Calibration;
+use topspin_core::calib::camera::CameraCalib;
+use topspin_core::logo::BallView;
+use topspin_lab::logo::eval::MIN_FRAMES;
+use topspin_core::physics::{Vec3, rad_to_rps};
+use topspin_sim::render::{Conditions, Frame, Scene, Sequence, SequenceOptions, render_sequence};
+use topspin_sim::{Setting, TrackerModel, simulate_ball};
+use topspin_core::time::Instant;
+use topspin_core::wire::crop::{CROP_MAX_LEN, Crop};
 
 /// Where the live stream's capture clock starts before the first ball, s.
 pub const STREAM_LEAD: f64 = 0.2;
@@ -265,13 +265,13 @@ fn write_dataset(dir: &Path, seed: u64, cam: &CameraCalib, sequences: &[Sequence
 fn stream(to: &str, bind: &str, sequences: &[Sequence]) -> anyhow::Result<()> {
     let socket = UdpSocket::bind(bind).map_err(|e| bad(format!("--bind {bind}: {e}")))?;
     socket.connect(to).map_err(|e| bad(format!("--to {to}: {e}")))?;
-    let epoch = std::time::Instant::now();
+    let epoch = topspin_daemon::clock::now();
     let mut buf = vec![0u8; CROP_MAX_LEN];
     let (mut seq, mut sent) = (0u32, 0usize);
     for (j, s) in sequences.iter().enumerate() {
         for f in &s.frames {
             let capture = STREAM_LEAD + j as f64 * STREAM_GAP + f.label.t;
-            if let Some(wait) = Duration::from_secs_f64(capture).checked_sub(epoch.elapsed()) {
+            if let Some(wait) = Duration::from_secs_f64(capture).checked_sub(std::time::Duration::from_secs_f64(topspin_daemon::clock::secs_since(epoch))) {
                 std::thread::sleep(wait);
             }
             let crop = Crop {

@@ -1,5 +1,5 @@
 //! `topspin replay FILE`: re-run a recorded session and compare its strike
-//! plans bit for bit (DESIGN §8; the contract is in [`crate::record`]).
+//! plans bit for bit (DESIGN §8; the contract is in [`topspin_daemon::record`]).
 //! Exit 0: every plan identical; 1: a plan differs (or one is missing);
 //! 2: the file is not a usable recording.
 
@@ -8,9 +8,9 @@ use std::path::PathBuf;
 use clap::Args;
 
 use super::BadInput;
-use crate::record::{read_session, replay::replay_session};
-use crate::viewer::replay::view_session;
-use crate::viewer::{LiveServer, ViewerSink};
+use topspin_daemon::record::{read_session, replay::replay_session};
+use topspin_daemon::viewer::replay::view_session;
+use topspin_daemon::viewer::{LiveServer, ViewerSink};
 
 #[derive(Debug, Args)]
 pub struct ReplayArgs {
@@ -21,7 +21,7 @@ pub struct ReplayArgs {
     pub json: bool,
     /// Then show the session in the live Foxglove view on ADDR (default
     /// 127.0.0.1:8765), replayed through the estimator as it ran.
-    #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = crate::viewer::DEFAULT_LIVE_ADDR)]
+    #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = topspin_daemon::viewer::DEFAULT_LIVE_ADDR)]
     pub live: Option<std::net::SocketAddr>,
     /// With --live: recorded seconds per second (0: as fast as it goes).
     #[arg(long, default_value_t = 1.0)]
@@ -32,11 +32,11 @@ pub struct ReplayArgs {
 }
 
 /// Serves the session in the live view (after the comparison).
-fn live(args: &ReplayArgs, session: &crate::record::Session, addr: std::net::SocketAddr) -> anyhow::Result<()> {
+fn live(args: &ReplayArgs, session: &topspin_daemon::record::Session, addr: std::net::SocketAddr) -> anyhow::Result<()> {
     let server = LiveServer::start(addr, None).map_err(|e| BadInput(e.to_string()))?;
     eprintln!("live view on ws://{} (Foxglove: Open connection → Foxglove WebSocket)", server.addr());
-    let until = std::time::Instant::now() + std::time::Duration::from_secs_f64(args.live_wait.max(0.0));
-    while server.clients() == 0 && std::time::Instant::now() < until {
+    let start = topspin_daemon::clock::now();
+    while server.clients() == 0 && topspin_daemon::clock::secs_since(start) < args.live_wait {
         std::thread::sleep(std::time::Duration::from_millis(50));
     }
     std::thread::sleep(std::time::Duration::from_millis(500));

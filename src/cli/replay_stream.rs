@@ -4,12 +4,12 @@
 use serde_json::json;
 
 use super::BadInput;
-use crate::calib::Calibration;
-use crate::estimator::{Estimator, EstimatorConfig, EstimatorEvent};
-use crate::fit::Sample;
-use crate::physics::rad_to_rps;
-use crate::plan::StrikePlan;
-use crate::time::Instant;
+use topspin_core::calib::Calibration;
+use topspin_core::estimator::{Estimator, EstimatorConfig, EstimatorEvent};
+use topspin_core::fit::Sample;
+use topspin_core::physics::rad_to_rps;
+use topspin_core::plan::StrikePlan;
+use topspin_core::time::Instant;
 
 /// One ball as the estimator saw it.
 #[derive(Debug)]

@@ -13,17 +13,17 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use clap::Args;
 
 use super::BadInput;
-use crate::calib::Calibration;
-use crate::calib::camera::CameraCalib;
-use crate::config::{DaemonConfig, LogoMethodConfig, RsiWait};
-use crate::record::sink::RecordingSink;
-use crate::record::{Recorder, calib_files};
-use crate::rsi::server::WaitStrategy;
-use crate::runtime::daemon::{Daemon, LogoMethodChoice, LogoRuntime, RuntimeConfig, ThreadSpec};
-use crate::runtime::telemetry::TelemetrySink;
-use crate::systemd::Notifier;
-use crate::time::Duration;
-use crate::viewer::{LiveServer, ViewerSink};
+use topspin_core::calib::Calibration;
+use topspin_core::calib::camera::CameraCalib;
+use topspin_daemon::config::{DaemonConfig, LogoMethodConfig, RsiWait};
+use topspin_daemon::record::sink::RecordingSink;
+use topspin_daemon::record::{Recorder, calib_files};
+use topspin_daemon::rsi_server::WaitStrategy;
+use topspin_daemon::runtime::daemon::{Daemon, LogoMethodChoice, LogoRuntime, RuntimeConfig, ThreadSpec};
+use topspin_daemon::runtime::telemetry::TelemetrySink;
+use topspin_daemon::systemd::Notifier;
+use topspin_core::time::Duration;
+use topspin_daemon::viewer::{LiveServer, ViewerSink};
 
 #[derive(Debug, Args)]
 pub struct RunArgs {
@@ -42,7 +42,7 @@ pub struct RunArgs {
 /// thread, the camera's calibration).
 pub fn runtime_config(c: &DaemonConfig) -> Result<RuntimeConfig, BadInput> {
     let t = &c.threads;
-    let spec = |core: crate::config::Core, priority: u8| ThreadSpec { core: core.0, priority: Some(priority as i32) };
+    let spec = |core: topspin_daemon::config::Core, priority: u8| ThreadSpec { core: core.0, priority: Some(priority as i32) };
     Ok(RuntimeConfig {
         tracker_bind: c.network.tracker_bind,
         tracker_source: Some(c.network.tracker_source),
@@ -103,7 +103,7 @@ pub fn run(a: RunArgs) -> anyhow::Result<()> {
     let recording = if cfg.recording.enabled {
         let dir = &cfg.recording.dir;
         std::fs::create_dir_all(dir).map_err(|e| BadInput(format!("recording.dir {}: {e}", dir.display())))?;
-        let stamp = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_secs());
+        let stamp = topspin_daemon::clock::unix_now_ns() / 1_000_000_000;
         // A restart within the same second (systemd after a crash) must not
         // overwrite the crashed run's recording.
         let path = (0..)
@@ -152,7 +152,7 @@ pub fn run(a: RunArgs) -> anyhow::Result<()> {
     let notify = Notifier::from_env();
     let _ = notify.ready();
     let watchdog = notify.watchdog_interval().map(|d| d / 2);
-    let mut last_ping = std::time::Instant::now();
+    let mut last_ping = topspin_daemon::clock::now();
     let mut warned = 0;
     while !term.load(Ordering::Relaxed) {
         std::thread::sleep(std::time::Duration::from_millis(50));
@@ -161,10 +161,10 @@ pub fn run(a: RunArgs) -> anyhow::Result<()> {
             warned += 1;
         }
         if let Some(every) = watchdog
-            && last_ping.elapsed() >= every
+            && topspin_daemon::clock::secs_since(last_ping) >= every.as_secs_f64()
         {
             let _ = notify.watchdog();
-            last_ping = std::time::Instant::now();
+            last_ping = topspin_daemon::clock::now();
         }
     }
     tracing::info!(target: "topspin", "stopping: bringing the bat home");

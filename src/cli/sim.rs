@@ -13,8 +13,8 @@ use anyhow::Context as _;
 use serde::Serialize;
 
 use super::BadInput;
-use crate::calib::Calibration;
-use crate::sim::{self, Setting, SimBall, TrackerModel, Truth};
+use topspin_core::calib::Calibration;
+use topspin_sim::{self as sim, Setting, SimBall, TrackerModel, Truth};
 
 /// Where the live stream's capture clock starts before the first launch, s
 /// (the tracker's monotonic clock counts from the start of the stream).
@@ -186,7 +186,7 @@ pub fn run(args: SimArgs) -> anyhow::Result<()> {
 
 fn summary(b: &SimBall) -> String {
     let t = &b.truth;
-    let v: crate::physics::Vec3 = t.launch.vel.into();
+    let v: topspin_core::physics::Vec3 = t.launch.vel.into();
     let mut s = format!(
         "ball {:03} {:<15} speed {:5.2} m/s spin {:5.1} rps [{:7.1} {:7.1} {:7.1}] rad/s",
         b.index,
@@ -249,15 +249,15 @@ fn write_files(dir: &Path, a: &SimOptions, p: &Plan, balls: &[SimBall], starts: 
     Ok(())
 }
 
-/// Streams in real time (see [`crate::sim::stream`]); the capture clock is
+/// Streams in real time (see [`topspin_sim::stream`]); the capture clock is
 /// the process clock, ball k launched at `STREAM_LEAD + starts[k]` s after
 /// the start.
 fn stream(to: &str, bind: &str, tracker: &TrackerModel, balls: &[SimBall], starts: &[f64]) -> anyhow::Result<()> {
     let socket = UdpSocket::bind(bind).map_err(|e| bad(format!("--bind {bind}: {e}")))?;
     socket.connect(to).map_err(|e| bad(format!("--to {to}: {e}")))?;
-    let t0 = crate::runtime::now() + crate::time::Duration::from_nanos((STREAM_LEAD * 1e9) as u64);
+    let t0 = topspin_daemon::clock::now() + topspin_core::time::Duration::from_nanos((STREAM_LEAD * 1e9) as u64);
     let stop = std::sync::atomic::AtomicBool::new(false);
-    let stats = crate::sim::stream::stream(&socket, balls, starts, tracker.latency, t0, &stop)
+    let stats = topspin_sim::stream::stream(&socket, balls, starts, tracker.latency, t0, &stop)
         .with_context(|| format!("sending to {to}"))?;
     let total: usize = balls.iter().map(|b| b.observations.len()).sum();
     let mut err = std::io::stderr().lock();

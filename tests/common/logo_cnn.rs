@@ -3,11 +3,11 @@
 
 use std::path::PathBuf;
 
-use topspin::calib::Calibration;
-use topspin::calib::camera::CameraCalib;
-use topspin::logo::cnn::{Backend, CnnOutput, INPUT_SIZE, LogoCnn, default_model};
-use topspin::render::{BallColour, Scene, SequenceOptions, render_sequence};
-use topspin::sim::{Setting, TrackerModel, simulate_ball};
+use topspin_core::calib::Calibration;
+use topspin_core::calib::camera::CameraCalib;
+use topspin_core::logo::cnn::{Backend, CnnOutput, INPUT_SIZE, LogoCnn, default_model};
+use topspin_sim::render::{BallColour, Scene, SequenceOptions, render_sequence};
+use topspin_sim::{Setting, TrackerModel, simulate_ball};
 
 /// The committed model and its metrics (with the reference outputs).
 pub fn model() -> (PathBuf, serde_json::Value) {
@@ -70,7 +70,7 @@ pub fn check(backend: Backend) {
         net.infer(&crops, &mut out).expect("inference");
         for (f, o) in seq.frames.iter().zip(&out) {
             let m = f.label.measured;
-            let view = topspin::logo::BallView::new(&cam, m.u, m.v, m.radius).unwrap();
+            let view = topspin_core::logo::BallView::new(&cam, m.u, m.v, m.radius).unwrap();
             let truth = view.to_view(&f.label.logo_camera);
             total += 1;
             right += ((o.visibility >= 0.5) == (truth.z > 0.0)) as usize;

@@ -1,0 +1,280 @@
+//! Calibration: the files in `calib/` (table, physics, strike, robot). The repository's `calib/` is compiled in as the
+//! default; `--calib DIR` loads another folder with the same file names,
+//! where each missing file falls back to the compiled default.
+
+use std::path::{Path, PathBuf};
+
+pub mod camera;
+
+use serde::{Deserialize, Serialize};
+
+use crate::physics::{PhysicsParams, Propagator, Table};
+
+pub mod robot;
+pub use robot::RobotFile;
+
+/// The compiled-in defaults (the repository's `calib/` folder).
+const DEFAULT_PHYSICS: &str = include_str!("../../../../calib/physics.toml");
+const DEFAULT_TABLE: &str = include_str!("../../../../calib/table.toml");
+const DEFAULT_STRIKE: &str = include_str!("../../../../calib/strike.toml");
+const DEFAULT_ROBOT: &str = include_str!("../../../../calib/robot.toml");
+
+/// `calib/physics.toml`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PhysicsFile {
+    /// Format version of the file.
+    pub version: u32,
+    pub physics: PhysicsParams,
+}
+
+/// `calib/table.toml`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TableFile {
+    pub version: u32,
+    pub table: Table,
+}
+
+/// Where and how the robot meets the ball (`calib/strike.toml`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct StrikeCalib {
+    /// The hitting plane x = hit_plane_x in the table frame, m.
+    pub hit_plane_x: f64,
+    /// Hitting window on the plane: allowed y range, m (table frame).
+    pub window_y: [f64; 2],
+    /// Allowed z range of the hitting point, m (table frame).
+    pub window_z: [f64; 2],
+    /// The least time between a plan and its hit the robot can use, s.
+    pub min_lead_time: f64,
+    /// Bat speed towards the opponent at the hit, m/s.
+    pub bat_speed: f64,
+    /// ω_ref: the spin ω_y at which β reaches its topspin/backspin angle, rad/s.
+    pub spin_ref: f64,
+    /// β (rotation about y) for ω_y ≥ +ω_ref, degrees.
+    pub beta_topspin_deg: f64,
+    /// β for ω_y ≤ −ω_ref, degrees.
+    pub beta_backspin_deg: f64,
+    /// A (rotation about z) = a0 + a_per_y · y, degrees and degrees per m.
+    pub a0_deg: f64,
+    pub a_per_y_deg: f64,
+    /// C (rotation about x) = c0 + c_per_y · y, degrees and degrees per m.
+    pub c0_deg: f64,
+    pub c_per_y_deg: f64,
+}
+
+impl StrikeCalib {
+    /// True when a hitting point at (y, z) lies in the hitting window.
+    pub fn in_window(&self, y: f64, z: f64) -> bool {
+        (self.window_y[0]..=self.window_y[1]).contains(&y) && (self.window_z[0]..=self.window_z[1]).contains(&z)
+    }
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct StrikeFile {
+    pub version: u32,
+    pub strike: StrikeCalib,
+}
+
+/// Everything calibrated, loaded and validated.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Calibration {
+    pub physics: PhysicsParams,
+    pub table: Table,
+    pub strike: StrikeCalib,
+    /// The robot cell (`calib/robot.toml`).
+    pub robot: RobotFile,
+}
+
+/// A calibration file that cannot be used.
+#[derive(Debug, thiserror::Error)]
+pub enum CalibError {
+    #[error("cannot read {path}: {source}")]
+    Read { path: PathBuf, source: std::io::Error },
+    #[error("{path}: {message}")]
+    Parse { path: PathBuf, message: String },
+    #[error("{path}: {source}")]
+    Invalid { path: PathBuf, source: crate::physics::params::InvalidParam },
+    #[error("{path}: `{key}` = {value} is out of range")]
+    OutOfRange { path: PathBuf, key: &'static str, value: f64 },
+}
+
+fn parse<T: for<'de> Deserialize<'de>>(text: &str, path: &Path) -> Result<T, CalibError> {
+    toml::from_str(text).map_err(|e| CalibError::Parse {
+        path: path.to_owned(),
+        message: e.message().to_owned() + &e.span().map(|s| format!(" (at byte {})", s.start)).unwrap_or_default(),
+    })
+}
+
+fn read_or_default(dir: Option<&Path>, name: &str, default: &'static str) -> Result<(String, PathBuf), CalibError> {
+    match dir {
+        Some(d) => {
+            let path = d.join(name);
+            if path.exists() {
+                let text =
+                    std::fs::read_to_string(&path).map_err(|source| CalibError::Read { path: path.clone(), source })?;
+                return Ok((text, path));
+            }
+            Ok((default.to_owned(), PathBuf::from(format!("<default>/{name}"))))
+        }
+        None => Ok((default.to_owned(), PathBuf::from(format!("<default>/{name}")))),
+    }
+}
+
+impl Calibration {
+    /// The compiled-in calibration (the repository's `calib/`).
+    pub fn default_cell() -> Self {
+        Self::load(None).expect("compiled-in calibration is valid (tested)")
+    }
+
+    /// Loads `dir` (or the compiled defaults with `None`) and validates it.
+    pub fn load(dir: Option<&Path>) -> Result<Self, CalibError> {
+        if let Some(d) = dir
+            && !d.is_dir()
+        {
+            return Err(CalibError::Read {
+                path: d.to_owned(),
+                source: std::io::Error::new(std::io::ErrorKind::NotFound, "not a directory"),
+            });
+        }
+        let physics = read_or_default(dir, "physics.toml", DEFAULT_PHYSICS)?;
+        let table = read_or_default(dir, "table.toml", DEFAULT_TABLE)?;
+        let strike = read_or_default(dir, "strike.toml", DEFAULT_STRIKE)?;
+        let robot = read_or_default(dir, "robot.toml", DEFAULT_ROBOT)?;
+        Self::from_texts((&physics.0, &physics.1), (&table.0, &table.1), (&strike.0, &strike.1), (&robot.0, &robot.1))
+    }
+
+    /// Parses and validates the four files' texts (each with the path its
+    /// errors name): no file system, never panics (fuzzed:
+    /// `fuzz/fuzz_targets/calib.rs`).
+    pub fn from_texts(
+        physics: (&str, &Path),
+        table: (&str, &Path),
+        strike: (&str, &Path),
+        robot: (&str, &Path),
+    ) -> Result<Self, CalibError> {
+        let (text, path) = (physics.0, physics.1.to_owned());
+        let physics = parse::<PhysicsFile>(text, &path)?.physics;
+        physics.validate().map_err(|source| CalibError::Invalid { path: path.clone(), source })?;
+
+        let (text, path) = (table.0, table.1.to_owned());
+        let table = parse::<TableFile>(text, &path)?.table;
+        for (key, value) in [
+            ("table.length", table.length),
+            ("table.width", table.width),
+            ("table.net_height", table.net_height),
+            ("table.net_length", table.net_length),
+        ] {
+            if !(value.is_finite() && value > 0.0) {
+                return Err(CalibError::OutOfRange { path, key, value });
+            }
+        }
+
+        let (text, path) = (strike.0, strike.1.to_owned());
+        let strike = parse::<StrikeFile>(text, &path)?.strike;
+        let s = &strike;
+        let ordered = |r: [f64; 2]| r[0].is_finite() && r[1].is_finite() && r[0] < r[1];
+        let checks = [
+            ("strike.hit_plane_x", s.hit_plane_x, s.hit_plane_x.is_finite() && s.hit_plane_x > 0.0),
+            ("strike.window_y", s.window_y[0], ordered(s.window_y)),
+            ("strike.window_z", s.window_z[0], ordered(s.window_z)),
+            ("strike.min_lead_time", s.min_lead_time, s.min_lead_time.is_finite() && s.min_lead_time >= 0.0),
+            ("strike.bat_speed", s.bat_speed, s.bat_speed.is_finite() && (0.0..=5.0).contains(&s.bat_speed)),
+            ("strike.spin_ref", s.spin_ref, s.spin_ref.is_finite() && s.spin_ref > 0.0),
+            ("strike.beta_topspin_deg", s.beta_topspin_deg, s.beta_topspin_deg.abs() <= 90.0),
+            ("strike.beta_backspin_deg", s.beta_backspin_deg, s.beta_backspin_deg.abs() <= 90.0),
+            ("strike.a0_deg", s.a0_deg, s.a0_deg.abs() <= 180.0),
+            ("strike.a_per_y_deg", s.a_per_y_deg, s.a_per_y_deg.abs() <= 180.0),
+            ("strike.c0_deg", s.c0_deg, s.c0_deg.abs() <= 180.0),
+            ("strike.c_per_y_deg", s.c_per_y_deg, s.c_per_y_deg.abs() <= 180.0),
+        ];
+        for (key, value, ok) in checks {
+            if !ok {
+                return Err(CalibError::OutOfRange { path, key, value });
+            }
+        }
+        let (text, path) = (robot.0, robot.1.to_owned());
+        let robot = parse::<RobotFile>(text, &path)?;
+        robot.validate().map_err(|b| CalibError::OutOfRange { path: path.clone(), key: b.key, value: b.value })?;
+        // The hitting window's corners must lie inside the robot's workspace
+        // (the base may be yawed, so check all four).
+        let ws = &robot.workspace;
+        let inside = |p: crate::physics::Vec3| (0..3).all(|i| (ws.min_xyz_m[i]..=ws.max_xyz_m[i]).contains(&p[i]));
+        for y in strike.window_y {
+            for z in strike.window_z {
+                if !inside(robot.t_to_b(crate::physics::Vec3::new(strike.hit_plane_x, y, z))) {
+                    let key = if inside(robot.t_to_b(crate::physics::Vec3::new(
+                        strike.hit_plane_x,
+                        y,
+                        0.5 * (strike.window_z[0] + strike.window_z[1]),
+                    ))) {
+                        "strike.window_z (outside the robot's workspace)"
+                    } else {
+                        "strike.window_y (outside the robot's workspace)"
+                    };
+                    return Err(CalibError::OutOfRange {
+                        path: path.clone(),
+                        key,
+                        value: if key.contains("window_z") { z } else { y },
+                    });
+                }
+            }
+        }
+        // The hitting plane must cross the robot's workspace.
+        let x_b = robot.t_to_b(crate::physics::Vec3::new(strike.hit_plane_x, 0.0, 0.0)).x;
+        if !(robot.workspace.min_xyz_m[0]..=robot.workspace.max_xyz_m[0]).contains(&x_b) {
+            return Err(CalibError::OutOfRange {
+                path,
+                key: "strike.hit_plane_x (outside robot workspace)",
+                value: strike.hit_plane_x,
+            });
+        }
+        Ok(Calibration { physics, table, strike, robot })
+    }
+
+    /// The same cell with the paper's constant physics coefficients.
+    pub fn with_paper_physics(mut self) -> Self {
+        self.physics = PhysicsParams::paper();
+        self
+    }
+
+    /// The propagator for this cell's physics and table.
+    pub fn propagator(&self) -> Propagator {
+        Propagator::new(self.physics.flight_model(), self.physics.bounce_model(), self.table)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn compiled_defaults_load() {
+        let c = Calibration::default_cell();
+        assert!(c.strike.hit_plane_x > c.table.robot_end_x());
+    }
+
+    #[test]
+    fn a_bad_value_is_named() {
+        let dir = std::env::temp_dir().join(format!("topspin-calib-test-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        std::fs::write(dir.join("strike.toml"), DEFAULT_STRIKE.replace("hit_plane_x = 1.60", "hit_plane_x = -3.0"))
+            .unwrap();
+        let e = Calibration::load(Some(&dir)).unwrap_err().to_string();
+        assert!(e.contains("strike.hit_plane_x"), "{e}");
+        std::fs::write(dir.join("strike.toml"), DEFAULT_STRIKE.replace("hit_plane_x = 1.60", "hit_plane = 1.6"))
+            .unwrap();
+        let e = Calibration::load(Some(&dir)).unwrap_err().to_string();
+        assert!(e.contains("hit_plane"), "{e}");
+        std::fs::write(
+            dir.join("strike.toml"),
+            DEFAULT_STRIKE.replace("window_y = [-0.60, 0.60]", "window_y = [-0.90, 0.60]"),
+        )
+        .unwrap();
+        let e = Calibration::load(Some(&dir)).unwrap_err().to_string();
+        assert!(e.contains("strike.window_y") && e.contains("workspace"), "{e}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}

@@ -1,0 +1,24 @@
+//! topspin's daemon: the process that runs on the robot PC. It owns the
+//! one clock reader, the threads and their real-time set-up, the RSI
+//! server loop, the configuration, systemd, recording/replay and the live
+//! Foxglove view, around the sans-IO core (`topspin-core`). Nothing here
+//! simulates, renders, evaluates or plots: those live above, in
+//! `topspin-sim` and `topspin-lab`.
+//!
+//! - [`clock`]: the only place that reads the clock.
+//! - [`runtime`]: the daemon's threads, real-time set-up and telemetry.
+//! - [`rsi_server`]: the sensor-side UDP loop around the RSI session.
+//! - [`config`]: the layered, validated configuration.
+//! - [`systemd`]: readiness and watchdog notifications.
+//! - [`record`]: session recording (MCAP) and bit-exact replay.
+//! - [`channels`]: the topics and schemas the recording and the view share.
+//! - [`viewer`]: the Foxglove view, live and from a recording.
+
+pub mod channels;
+pub mod clock;
+pub mod config;
+pub mod record;
+pub mod rsi_server;
+pub mod runtime;
+pub mod systemd;
+pub mod viewer;

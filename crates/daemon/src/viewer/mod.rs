@@ -1,0 +1,250 @@
+//! The viewer: what Foxglove shows of the robot thinking — a 3D scene in
+//! the table frame and time series — built on the telemetry thread from
+//! the events it already receives, and sent to a live Foxglove WebSocket
+//! server ([`live`]) and/or into the session recording (same channels, same
+//! log times, so a recording and a live run look the same).
+//!
+//! Cold path only: everything here allocates and encodes; the hot threads
+//! (ingest, estimator, RSI) only push their fixed-size `Copy` events into
+//! their rings ([`crate::runtime::telemetry`]) and never wait for a viewer.
+//!
+//! # Channels
+//!
+//! Frames: `table` (the table frame T, the root) and `robot_base` (B), the
+//! transform on `/tf`. Protobuf messages use Foxglove's well-known schemas
+//! (the `foxglove` crate's); the plots are JSON with a JSON Schema.
+//!
+//! | topic | schema | what |
+//! |---|---|---|
+//! | `/view/cell` | `foxglove.SceneUpdate` | table, lines and net; robot base and workspace box (in `robot_base`); the hitting window — again every [`CELL_INTERVAL_S`] for clients that join later |
+//! | `/tf` | `foxglove.FrameTransform` | `table` → `robot_base` |
+//! | `/view/ball` | `foxglove.SceneUpdate` | each observation (`obs/<n>`, [`OBS_LIFETIME_S`]; cyan tracked, grey not tracked, red rejected by the EKF gate), the EKF estimate (`ekf`), the predicted path through the bounce to the hitting plane (`prediction`, with the crossing `hit`) after every observation, the spin arrow with its magnitude (`spin`), the logo direction (`logo`) |
+//! | `/view/robot` | `foxglove.SceneUpdate` | the planned bat (`bat_plan`: a disc at the hitting point, its velocity arrow), the actual and commanded TCP (`tcp_actual`, `tcp_commanded`, in `robot_base`) |
+//! | `/view/plan_pose` | `foxglove.PoseInFrame` | the planned bat pose (`table`) |
+//! | `/view/tcp` | `foxglove.PosesInFrame` | `[actual, commanded]` TCP (`robot_base`), every [`TCP_DECIMATION`]th RSI cycle |
+//! | `/view/verdict` | `foxglove.SceneUpdate` | the demo only: hit or miss per ball at its true hitting point |
+//! | `/plot/spin` | JSON | the EKF spin per observation: `trajectory`, `x_rps`, `y_rps`, `z_rps`, `norm_rps` |
+//! | `/plot/prediction_error` | JSON | when a ball ends, per plan: `time_to_hit_s`, `error_mm` (hitting point), `dt_ms` (hitting time) against `reference` (`truth` in the demo, else the ball's last plan) |
+//! | `/plot/rsi` | JSON | per RSI answer: `latency_us`, `controller_late` (the controller's count), `slow_answers`, `plans_late`, `plans_rejected` |
+//! | `/plot/queues` | JSON | [`QueueDepths`] every [`crate::runtime::telemetry::QUEUE_INTERVAL_S`] |
+//! | `/logo/crop` | `foxglove.RawImage` | the logo thread's crop (`rgb8`) |
+//! | `/logo/fit` | `foxglove.ImageAnnotations` | on the crop: the ball (circle) and the detected logo (filled dot) |
+//!
+//! The logo thread (built elsewhere) feeds `/logo/*` by pushing a
+//! [`LogoRecord`] into [`crate::runtime::daemon::Daemon::logo_tx`]; the
+//! telemetry thread hands it to [`ViewerSink::logo`](sink::ViewerSink).
+//!
+//! Log times are wall clock: the monotonic time + [`crate::clock::unix_offset_ns`].
+
+pub mod live;
+pub mod replay;
+pub mod sink;
+
+use foxglove::messages as fm;
+use serde::Serialize;
+
+pub use crate::channels::{TOPICS, Topic};
+pub use crate::runtime::telemetry::{LogoRecord, QueueDepths};
+pub use live::LiveServer;
+pub use sink::{DemoTruth, ViewerSink};
+
+/// Where `--live` serves without an address (loopback, Foxglove's usual port).
+pub const DEFAULT_LIVE_ADDR: &str = "127.0.0.1:8765";
+/// Seconds between re-sends of the static cell scene and transform.
+pub const CELL_INTERVAL_S: f64 = 1.0;
+/// How long an observation stays in the scene, s.
+pub const OBS_LIFETIME_S: f64 = 2.0;
+/// One `/view/tcp` and TCP scene message every this many RSI cycles.
+pub const TCP_DECIMATION: u64 = 5;
+/// Spacing of the predicted path's points, s.
+pub const PREDICTION_STEP_S: f64 = 0.01;
+/// The longest predicted path, s.
+pub const PREDICTION_HORIZON_S: f64 = 1.5;
+/// Spin arrow length per revolution per second, m.
+pub const SPIN_ARROW_M_PER_RPS: f64 = 0.004;
+
+/// The parent frame: the table frame T.
+pub const FRAME_TABLE: &str = "table";
+/// The robot base frame B.
+pub const FRAME_BASE: &str = "robot_base";
+
+/// `/plot/spin`.
+#[derive(Copy, Clone, Debug, Serialize)]
+pub struct SpinPlot {
+    pub trajectory: u32,
+    pub x_rps: f64,
+    pub y_rps: f64,
+    pub z_rps: f64,
+    pub norm_rps: f64,
+}
+
+/// `/plot/prediction_error`.
+#[derive(Copy, Clone, Debug, Serialize)]
+pub struct PredictionErrorPlot {
+    pub trajectory: u32,
+    pub seq: u32,
+    pub time_to_hit_s: f64,
+    pub error_mm: f64,
+    pub dt_ms: f64,
+    /// `truth` or `last plan`.
+    pub reference: &'static str,
+}
+
+/// `/plot/rsi`.
+#[derive(Copy, Clone, Debug, Default, Serialize)]
+pub struct RsiPlot {
+    pub latency_us: u64,
+    pub controller_late: u64,
+    pub slow_answers: u64,
+    pub plans_late: u64,
+    pub plans_rejected: u64,
+}
+
+/// A live server that cannot start.
+#[derive(Debug, thiserror::Error)]
+pub enum ViewerError {
+    /// The WebSocket server could not bind or start.
+    #[error("live view on {addr}: {message}")]
+    Start { addr: std::net::SocketAddr, message: String },
+}
+
+// Small geometry helpers (Foxglove's types from ours).
+
+pub(crate) fn v3(p: topspin_core::physics::Vec3) -> fm::Vector3 {
+    fm::Vector3 { x: p.x, y: p.y, z: p.z }
+}
+
+pub(crate) fn p3(p: topspin_core::physics::Vec3) -> fm::Point3 {
+    fm::Point3 { x: p.x, y: p.y, z: p.z }
+}
+
+pub(crate) fn color(r: f64, g: f64, b: f64, a: f64) -> fm::Color {
+    fm::Color { r, g, b, a }
+}
+
+/// The identity rotation.
+pub(crate) const IDENTITY: fm::Quaternion = fm::Quaternion { x: 0.0, y: 0.0, z: 0.0, w: 1.0 };
+
+fn qmul(p: fm::Quaternion, q: fm::Quaternion) -> fm::Quaternion {
+    fm::Quaternion {
+        w: p.w * q.w - p.x * q.x - p.y * q.y - p.z * q.z,
+        x: p.w * q.x + p.x * q.w + p.y * q.z - p.z * q.y,
+        y: p.w * q.y - p.x * q.z + p.y * q.w + p.z * q.x,
+        z: p.w * q.z + p.x * q.y - p.y * q.x + p.z * q.w,
+    }
+}
+
+/// Rotation of KUKA Euler angles ZYX (rad): `a` about z, then `b` about
+/// the new y, then `c` about the new x.
+pub(crate) fn quat_zyx(a: f64, b: f64, c: f64) -> fm::Quaternion {
+    let (sa, ca) = (a / 2.0).sin_cos();
+    let (sb, cb) = (b / 2.0).sin_cos();
+    let (sc, cc) = (c / 2.0).sin_cos();
+    let qz = fm::Quaternion { x: 0.0, y: 0.0, z: sa, w: ca };
+    let qy = fm::Quaternion { x: 0.0, y: sb, z: 0.0, w: cb };
+    let qx = fm::Quaternion { x: sc, y: 0.0, z: 0.0, w: cc };
+    qmul(qmul(qz, qy), qx)
+}
+
+/// The rotation taking +x onto `d` (identity for a zero vector).
+pub(crate) fn quat_x_to(d: topspin_core::physics::Vec3) -> fm::Quaternion {
+    let n = d.norm();
+    if !(n.is_finite() && n > 1e-12) {
+        return IDENTITY;
+    }
+    let u = d / n;
+    let w = 1.0 + u.x;
+    if w < 1e-9 {
+        // Opposite to +x: half a turn about z.
+        return fm::Quaternion { x: 0.0, y: 0.0, z: 1.0, w: 0.0 };
+    }
+    // q = (1 + x·u, x × u) normalised; x × u = (0, −u.z, u.y).
+    let (qx, qy, qz) = (0.0, -u.z, u.y);
+    let norm = (w * w + qy * qy + qz * qz).sqrt();
+    fm::Quaternion { x: qx / norm, y: qy / norm, z: qz / norm, w: w / norm }
+}
+
+/// A pose from a position and a rotation.
+pub(crate) fn pose(p: topspin_core::physics::Vec3, q: fm::Quaternion) -> fm::Pose {
+    fm::Pose { position: Some(v3(p)), orientation: Some(q) }
+}
+
+/// Foxglove's timestamp of `ns` since the Unix epoch.
+pub(crate) fn stamp(ns: u64) -> fm::Timestamp {
+    fm::Timestamp::new((ns / 1_000_000_000) as u32, (ns % 1_000_000_000) as u32)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use topspin_core::physics::Vec3;
+
+    fn rotate(q: fm::Quaternion, v: Vec3) -> Vec3 {
+        let p = fm::Quaternion { x: v.x, y: v.y, z: v.z, w: 0.0 };
+        let c = fm::Quaternion { x: -q.x, y: -q.y, z: -q.z, w: q.w };
+        let r = qmul(qmul(q, p), c);
+        Vec3::new(r.x, r.y, r.z)
+    }
+
+    #[test]
+    fn x_goes_to_the_direction() {
+        for d in [Vec3::new(0.0, 0.0, 2.0), Vec3::new(-1.0, 0.0, 0.0), Vec3::new(0.3, -0.4, 0.5), Vec3::x()] {
+            let r = rotate(quat_x_to(d), Vec3::x());
+            assert!((r - d.normalize()).norm() < 1e-12, "{d:?} → {r:?}");
+        }
+    }
+
+    #[test]
+    fn zyx_matches_the_motion_layer() {
+        let (a, b, c) = (0.3, -0.2, 1.1);
+        let m = topspin_core::motion::limits::rot_zyx(a, b, c);
+        let q = quat_zyx(a, b, c);
+        for v in [Vec3::x(), Vec3::y(), Vec3::z()] {
+            let mv = Vec3::from(std::array::from_fn(|i| (0..3).map(|j| m[i][j] * v[j]).sum::<f64>()));
+            assert!((rotate(q, v) - mv).norm() < 1e-12);
+        }
+    }
+
+    /// Every topic the shipped layout names is one of ours.
+    #[test]
+    fn the_layout_names_our_topics() {
+        fn strings(v: &serde_json::Value, out: &mut Vec<String>) {
+            match v {
+                serde_json::Value::String(s) => out.push(s.clone()),
+                serde_json::Value::Array(a) => a.iter().for_each(|x| strings(x, out)),
+                serde_json::Value::Object(o) => o.iter().for_each(|(k, x)| {
+                    out.push(k.clone());
+                    strings(x, out)
+                }),
+                _ => {}
+            }
+        }
+        let layout: serde_json::Value =
+            serde_json::from_str(include_str!("../../../../deploy/foxglove-layout.json")).expect("layout parses");
+        let mut all = Vec::new();
+        strings(&layout["configById"], &mut all);
+        let topics: Vec<_> = all.iter().filter(|s| s.starts_with('/')).collect();
+        assert!(topics.len() > 10);
+        for t in topics {
+            let topic = t.split(['.', '[']).next().unwrap();
+            assert!(TOPICS.iter().any(|k| k.name() == topic), "the layout names {t}");
+        }
+    }
+
+    #[test]
+    fn every_topic_has_a_schema_and_a_distinct_name() {
+        let mut names: Vec<_> = TOPICS.iter().map(|t| t.name()).collect();
+        for (k, t) in TOPICS.iter().enumerate() {
+            assert_eq!(*t as usize, k);
+            let s = t.schema();
+            assert!(!s.data.is_empty());
+            assert_eq!(s.encoding, if t.encoding() == "json" { "jsonschema" } else { "protobuf" });
+            if t.encoding() == "json" {
+                let _: serde_json::Value = serde_json::from_slice(&s.data).expect("JSON schema parses");
+            }
+        }
+        names.sort();
+        names.dedup();
+        assert_eq!(names.len(), TOPICS.len());
+    }
+}

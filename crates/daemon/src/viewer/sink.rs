@@ -1,0 +1,686 @@
+//! [`ViewerSink`]: the telemetry thread's sink that builds the viewer's
+//! messages (see the module doc of [`crate::viewer`]) and sends them to the
+//! live server and into the recording; the recording's own channels are
+//! passed on unchanged.
+
+use std::collections::VecDeque;
+use std::sync::{Arc, OnceLock};
+
+use foxglove::Encode;
+use foxglove::messages as fm;
+use serde::Serialize;
+
+use super::{
+    CELL_INTERVAL_S, FRAME_BASE, FRAME_TABLE, IDENTITY, LiveServer, OBS_LIFETIME_S, PREDICTION_HORIZON_S,
+    PREDICTION_STEP_S, PredictionErrorPlot, RsiPlot, SPIN_ARROW_M_PER_RPS, SpinPlot, TCP_DECIMATION, Topic, color, p3,
+    pose, quat_x_to, quat_zyx, stamp, v3,
+};
+use topspin_core::calib::Calibration;
+use topspin_core::estimator::EstimatorEvent;
+use topspin_core::physics::propagate::{Event, StopAt};
+use topspin_core::physics::{BallState, Propagator, Vec3, rad_to_rps};
+use topspin_core::plan::StrikePlan;
+use crate::record::sink::RecordingSink;
+use topspin_core::rsi::codec::{KukaPose, RobFrame, SenFrame};
+use topspin_core::rsi::session::SessionEvent;
+use crate::runtime::telemetry::{
+    DatagramRecord, LOGO_CROP_SIDE, LogoRecord, QueueDepths, RsiRecord, Telemetry, TelemetrySink,
+};
+use topspin_core::time::{Duration, Instant};
+
+/// Ball radius drawn, m.
+const BALL_RADIUS: f64 = 0.02;
+/// Bat disc radius drawn, m.
+const BAT_RADIUS: f64 = 0.075;
+/// Actual-TCP samples kept for the demo's verdicts (RSI cycles).
+const TCP_TRAIL: usize = 512;
+
+/// One ball's true hitting-plane crossing (the demo knows it).
+#[derive(Copy, Clone, Debug)]
+pub struct TrueHit {
+    pub ball: usize,
+    pub t: Instant,
+    pub pos: Vec3,
+    pub vel: Vec3,
+    /// Inside the hitting window.
+    pub reachable: bool,
+}
+
+/// The demo's ground truth, set once its start time is known.
+pub type DemoTruth = Arc<OnceLock<Vec<TrueHit>>>;
+
+/// Where the messages go.
+struct Outputs {
+    live: Option<LiveServer>,
+    recording: Option<RecordingSink>,
+    offset: u64,
+    buf: Vec<u8>,
+    sent: u64,
+}
+
+impl Outputs {
+    fn wants(&self, topic: Topic) -> bool {
+        self.recording.is_some() || self.live.as_ref().is_some_and(|l| l.wants(topic))
+    }
+
+    fn wall(&self, t: Instant) -> u64 {
+        t.as_nanos() + self.offset
+    }
+
+    fn emit(&mut self, topic: Topic, log_time: u64) {
+        if let Some(l) = self.live.as_ref() {
+            l.send(topic, &self.buf, log_time);
+        }
+        if let Some(r) = self.recording.as_mut() {
+            r.view(topic, &self.buf, log_time);
+        }
+        self.sent += 1;
+    }
+
+    fn proto<T: Encode>(&mut self, topic: Topic, msg: &T, at: Instant) {
+        if !self.wants(topic) {
+            return;
+        }
+        self.buf.clear();
+        if msg.encode(&mut self.buf).is_ok() {
+            self.emit(topic, self.wall(at));
+        }
+    }
+
+    fn json<T: Serialize>(&mut self, topic: Topic, msg: &T, at: Instant) {
+        if !self.wants(topic) {
+            return;
+        }
+        self.buf.clear();
+        if serde_json::to_writer(&mut self.buf, msg).is_ok() {
+            self.emit(topic, self.wall(at));
+        }
+    }
+}
+
+/// What the viewer remembers of the current ball.
+#[derive(Debug, Default)]
+struct BallView {
+    trajectory: Option<u32>,
+    /// Plans of the current trajectory: (made_at, hit_time, position, seq).
+    plans: Vec<StrikePlan>,
+    /// Capture time (s) of the latest observation the EKF gate rejected.
+    rejected_t: Option<f64>,
+    last_pos: Option<Vec3>,
+}
+
+/// The telemetry sink behind the live view and the recording's viewer channels.
+pub struct ViewerSink {
+    cal: Calibration,
+    prop: Propagator,
+    out: Outputs,
+    ball: BallView,
+    obs_count: u64,
+    rsi_count: u64,
+    rsi: RsiPlot,
+    /// The RSI start pose (first `RIst`), for the commanded TCP.
+    start_pose: Option<KukaPose>,
+    /// Actual TCP in T, by request arrival.
+    trail: VecDeque<(Instant, Vec3)>,
+    truth: Option<DemoTruth>,
+    judged: usize,
+    next_cell: Option<Instant>,
+}
+
+impl std::fmt::Debug for ViewerSink {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ViewerSink")
+            .field("live", &self.out.live)
+            .field("recording", &self.out.recording.is_some())
+            .field("sent", &self.out.sent)
+            .finish_non_exhaustive()
+    }
+}
+
+impl ViewerSink {
+    /// A sink for the live server and/or the recording (its own channels
+    /// and the viewer's); `truth`: the demo's, for the hit/miss verdicts.
+    pub fn new(
+        cal: &Calibration,
+        live: Option<LiveServer>,
+        recording: Option<RecordingSink>,
+        truth: Option<DemoTruth>,
+    ) -> Self {
+        ViewerSink {
+            cal: cal.clone(),
+            prop: cal.propagator(),
+            out: Outputs { live, recording, offset: crate::clock::unix_offset_ns(), buf: Vec::new(), sent: 0 },
+            ball: BallView::default(),
+            obs_count: 0,
+            rsi_count: 0,
+            rsi: RsiPlot::default(),
+            start_pose: None,
+            trail: VecDeque::with_capacity(TCP_TRAIL),
+            truth,
+            judged: 0,
+            next_cell: None,
+        }
+    }
+
+    /// Log times = monotonic + `offset` (a replay uses its recording's).
+    pub fn with_offset(mut self, offset: u64) -> Self {
+        self.out.offset = offset;
+        self
+    }
+
+    /// Viewer messages sent so far (to the live server and/or recording).
+    pub fn sent(&self) -> u64 {
+        self.out.sent
+    }
+
+    /// The static cell: table, net, robot base, workspace, hitting window; and `/tf`.
+    fn cell(&mut self, at: Instant) {
+        let ts = Some(stamp(self.out.wall(at)));
+        let t = &self.cal.table;
+        let (hl, hw) = (t.length / 2.0, t.width / 2.0);
+        let white = color(1.0, 1.0, 1.0, 1.0);
+        let table = fm::SceneEntity {
+            timestamp: ts,
+            frame_id: FRAME_TABLE.into(),
+            id: "table".into(),
+            cubes: vec![
+                fm::CubePrimitive {
+                    pose: Some(pose(Vec3::new(0.0, 0.0, -0.015), IDENTITY)),
+                    size: Some(v3(Vec3::new(t.length, t.width, 0.03))),
+                    color: Some(color(0.05, 0.2, 0.45, 1.0)),
+                },
+                fm::CubePrimitive {
+                    pose: Some(pose(Vec3::new(0.0, 0.0, t.net_height / 2.0), IDENTITY)),
+                    size: Some(v3(Vec3::new(0.004, t.net_length, t.net_height))),
+                    color: Some(color(0.9, 0.9, 0.9, 0.5)),
+                },
+            ],
+            lines: vec![fm::LinePrimitive {
+                r#type: fm::line_primitive::Type::LineList as i32,
+                pose: Some(pose(Vec3::zeros(), IDENTITY)),
+                thickness: 0.02,
+                points: [
+                    (-hl, -hw, hl, -hw),
+                    (hl, -hw, hl, hw),
+                    (hl, hw, -hl, hw),
+                    (-hl, hw, -hl, -hw),
+                    (-hl, 0.0, hl, 0.0),
+                ]
+                .iter()
+                .flat_map(|&(x0, y0, x1, y1)| [p3(Vec3::new(x0, y0, 0.001)), p3(Vec3::new(x1, y1, 0.001))])
+                .collect(),
+                color: Some(white),
+                ..Default::default()
+            }],
+            ..Default::default()
+        };
+        let ws = &self.cal.robot.workspace;
+        let lo = Vec3::from(ws.min_xyz_m);
+        let hi = Vec3::from(ws.max_xyz_m);
+        let robot = fm::SceneEntity {
+            timestamp: ts,
+            frame_id: FRAME_BASE.into(),
+            id: "robot".into(),
+            cubes: vec![
+                fm::CubePrimitive {
+                    pose: Some(pose((lo + hi) / 2.0, IDENTITY)),
+                    size: Some(v3(hi - lo)),
+                    color: Some(color(0.2, 0.8, 0.3, 0.12)),
+                },
+                fm::CubePrimitive {
+                    pose: Some(pose(Vec3::new(0.0, 0.0, 0.1), IDENTITY)),
+                    size: Some(v3(Vec3::new(0.25, 0.25, 0.2))),
+                    color: Some(color(1.0, 0.45, 0.0, 1.0)),
+                },
+            ],
+            texts: vec![fm::TextPrimitive {
+                pose: Some(pose(Vec3::new(0.0, 0.0, 0.3), IDENTITY)),
+                billboard: true,
+                font_size: 14.0,
+                scale_invariant: true,
+                color: Some(white),
+                text: self.cal.robot.robot.model.clone(),
+            }],
+            ..Default::default()
+        };
+        let s = &self.cal.strike;
+        let x = s.hit_plane_x;
+        let window = fm::SceneEntity {
+            timestamp: ts,
+            frame_id: FRAME_TABLE.into(),
+            id: "hitting_window".into(),
+            lines: vec![fm::LinePrimitive {
+                r#type: fm::line_primitive::Type::LineLoop as i32,
+                pose: Some(pose(Vec3::zeros(), IDENTITY)),
+                thickness: 0.005,
+                points: vec![
+                    p3(Vec3::new(x, s.window_y[0], s.window_z[0])),
+                    p3(Vec3::new(x, s.window_y[1], s.window_z[0])),
+                    p3(Vec3::new(x, s.window_y[1], s.window_z[1])),
+                    p3(Vec3::new(x, s.window_y[0], s.window_z[1])),
+                ],
+                color: Some(color(1.0, 0.9, 0.1, 1.0)),
+                ..Default::default()
+            }],
+            ..Default::default()
+        };
+        self.out.proto(Topic::Cell, &fm::SceneUpdate { deletions: vec![], entities: vec![table, robot, window] }, at);
+        let base = &self.cal.robot.cell;
+        let yaw = self.cal.robot.base_yaw();
+        let tf = fm::FrameTransform {
+            timestamp: ts,
+            parent_frame_id: FRAME_TABLE.into(),
+            child_frame_id: FRAME_BASE.into(),
+            translation: Some(v3(Vec3::from(base.base_in_table_xyz_m))),
+            rotation: Some(quat_zyx(yaw, 0.0, 0.0)),
+        };
+        self.out.proto(Topic::Tf, &tf, at);
+    }
+
+    fn tick(&mut self, at: Instant) {
+        if self.next_cell.is_none_or(|n| at >= n) {
+            self.next_cell = Some(at + Duration::from_nanos((CELL_INTERVAL_S * 1e9) as u64));
+            self.cell(at);
+        }
+    }
+
+    fn entity(&self, at: Instant, frame: &str, id: &str) -> fm::SceneEntity {
+        fm::SceneEntity {
+            timestamp: Some(stamp(self.out.wall(at))),
+            frame_id: frame.into(),
+            id: id.into(),
+            ..Default::default()
+        }
+    }
+
+    fn observed(&mut self, capture: Instant, pos: Vec3, track: Option<(u32, BallState)>) {
+        self.obs_count += 1;
+        let new_trajectory = track.map(|(id, _)| id);
+        if new_trajectory.is_some() && new_trajectory != self.ball.trajectory {
+            self.end_ball(capture);
+            self.ball.trajectory = new_trajectory;
+        }
+        if !self.out.wants(Topic::Ball) && !self.out.wants(Topic::Spin) {
+            return;
+        }
+        let rejected = self.ball.rejected_t == Some(capture.as_secs_f64());
+        let c = match (rejected, track.is_some()) {
+            (true, _) => color(1.0, 0.1, 0.1, 1.0),
+            (false, true) => color(0.2, 0.9, 1.0, 0.9),
+            (false, false) => color(0.6, 0.6, 0.6, 0.7),
+        };
+        let mut obs = self.entity(capture, FRAME_TABLE, &format!("obs/{}", self.obs_count));
+        obs.lifetime = Some(fm::Duration::saturating_from_secs_f64(OBS_LIFETIME_S));
+        obs.spheres.push(fm::SpherePrimitive {
+            pose: Some(pose(pos, IDENTITY)),
+            size: Some(v3(Vec3::repeat(BALL_RADIUS * 1.2))),
+            color: Some(c),
+        });
+        let mut entities = vec![obs];
+        if let Some((trajectory, state)) = track {
+            self.ball.last_pos = Some(state.pos);
+            let mut ekf = self.entity(capture, FRAME_TABLE, "ekf");
+            ekf.spheres.push(fm::SpherePrimitive {
+                pose: Some(pose(state.pos, IDENTITY)),
+                size: Some(v3(Vec3::repeat(2.0 * BALL_RADIUS))),
+                color: Some(color(1.0, 0.55, 0.0, 1.0)),
+            });
+            entities.push(ekf);
+            entities.extend(self.prediction(capture, &state));
+            let rps = state.spin.map(rad_to_rps);
+            let mut spin = self.entity(capture, FRAME_TABLE, "spin");
+            let len = (rps.norm() * SPIN_ARROW_M_PER_RPS).clamp(0.0, 0.5);
+            spin.arrows.push(fm::ArrowPrimitive {
+                pose: Some(pose(state.pos, quat_x_to(state.spin))),
+                shaft_length: len * 0.8,
+                shaft_diameter: 0.006,
+                head_length: len * 0.2,
+                head_diameter: 0.015,
+                color: Some(color(0.9, 0.2, 0.9, 1.0)),
+            });
+            spin.texts.push(fm::TextPrimitive {
+                pose: Some(pose(state.pos + Vec3::new(0.0, 0.0, 0.08), IDENTITY)),
+                billboard: true,
+                font_size: 14.0,
+                scale_invariant: true,
+                color: Some(color(0.9, 0.2, 0.9, 1.0)),
+                text: format!("{:.0} rps", rps.norm()),
+            });
+            entities.push(spin);
+            let plot = SpinPlot { trajectory, x_rps: rps.x, y_rps: rps.y, z_rps: rps.z, norm_rps: rps.norm() };
+            self.out.json(Topic::Spin, &plot, capture);
+        }
+        self.out.proto(Topic::Ball, &fm::SceneUpdate { deletions: vec![], entities }, capture);
+    }
+
+    /// The predicted path from `state` through the bounce to the hitting plane.
+    fn prediction(&self, at: Instant, state: &BallState) -> Vec<fm::SceneEntity> {
+        let mut s = *state;
+        let t0 = at.as_secs_f64();
+        let mut t = t0;
+        let mut points = vec![p3(s.pos)];
+        let mut crossing = None;
+        while t < t0 + PREDICTION_HORIZON_S {
+            let stop = StopAt {
+                t_max: (t + PREDICTION_STEP_S).min(t0 + PREDICTION_HORIZON_S),
+                hit_plane_x: Some(self.cal.strike.hit_plane_x),
+                net: false,
+            };
+            let ev = self.prop.advance(&mut s, &mut t, &stop);
+            points.push(p3(s.pos));
+            match ev {
+                Event::HitPlane { .. } => {
+                    crossing = Some(s.pos);
+                    break;
+                }
+                Event::Floor { .. } | Event::Net { .. } => break,
+                Event::Bounce { .. } | Event::TimeLimit { .. } => {}
+            }
+        }
+        let mut path = self.entity(at, FRAME_TABLE, "prediction");
+        path.lines.push(fm::LinePrimitive {
+            r#type: fm::line_primitive::Type::LineStrip as i32,
+            pose: Some(pose(Vec3::zeros(), IDENTITY)),
+            thickness: 0.006,
+            points,
+            color: Some(color(1.0, 0.85, 0.2, 0.9)),
+            ..Default::default()
+        });
+        let mut hit = self.entity(at, FRAME_TABLE, "hit");
+        if let Some(p) = crossing {
+            hit.spheres.push(fm::SpherePrimitive {
+                pose: Some(pose(p, IDENTITY)),
+                size: Some(v3(Vec3::repeat(2.0 * BALL_RADIUS))),
+                color: Some(color(1.0, 0.85, 0.2, 0.5)),
+            });
+        }
+        vec![path, hit]
+    }
+
+    /// The ball ended (a new one started): its prediction errors.
+    fn end_ball(&mut self, at: Instant) {
+        let plans = std::mem::take(&mut self.ball.plans);
+        let Some(last) = plans.last().copied() else { return };
+        let truth = self.truth.as_ref().and_then(|t| t.get()).and_then(|hits| {
+            hits.iter()
+                .filter(|h| h.t.0.abs_diff(last.hit_time.0) < 50_000_000)
+                .min_by_key(|h| h.t.0.abs_diff(last.hit_time.0))
+        });
+        let (ref_t, ref_pos, reference) = match truth {
+            Some(h) => (h.t, h.pos, "truth"),
+            None => (last.hit_time, last.position, "last plan"),
+        };
+        for p in &plans {
+            let e = PredictionErrorPlot {
+                trajectory: p.trajectory,
+                seq: p.seq,
+                time_to_hit_s: ref_t.secs_since(p.made_at),
+                error_mm: (p.position - ref_pos).norm() * 1e3,
+                dt_ms: p.hit_time.secs_since(ref_t) * 1e3,
+                reference,
+            };
+            // Log time: when the plan was made (the plot's x is time_to_hit_s).
+            self.out.json(Topic::PredictionError, &e, p.made_at.min(at));
+        }
+    }
+
+    fn plan_view(&mut self, p: &StrikePlan) {
+        if self.ball.trajectory != Some(p.trajectory) {
+            self.end_ball(p.made_at);
+            self.ball.trajectory = Some(p.trajectory);
+        }
+        self.ball.plans.push(*p);
+        let q = quat_zyx(p.orientation.a, p.orientation.b, p.orientation.c);
+        let ts = Some(stamp(self.out.wall(p.made_at)));
+        self.out.proto(
+            Topic::PlanPose,
+            &fm::PoseInFrame { timestamp: ts, frame_id: FRAME_TABLE.into(), pose: Some(pose(p.position, q)) },
+            p.made_at,
+        );
+        let mut bat = self.entity(p.made_at, FRAME_TABLE, "bat_plan");
+        // The bat face's normal is the tool's z axis: a thin cylinder along z.
+        bat.cylinders.push(fm::CylinderPrimitive {
+            pose: Some(pose(p.position, q)),
+            size: Some(v3(Vec3::new(2.0 * BAT_RADIUS, 2.0 * BAT_RADIUS, 0.01))),
+            bottom_scale: 1.0,
+            top_scale: 1.0,
+            color: Some(color(0.85, 0.1, 0.1, 0.8)),
+        });
+        let speed = p.velocity.norm();
+        bat.arrows.push(fm::ArrowPrimitive {
+            pose: Some(pose(p.position, quat_x_to(p.velocity))),
+            shaft_length: (speed * 0.05).min(0.4),
+            shaft_diameter: 0.008,
+            head_length: 0.03,
+            head_diameter: 0.02,
+            color: Some(color(0.85, 0.1, 0.1, 1.0)),
+        });
+        bat.texts.push(fm::TextPrimitive {
+            pose: Some(pose(p.position + Vec3::new(0.0, 0.0, 0.12), IDENTITY)),
+            billboard: true,
+            font_size: 13.0,
+            scale_invariant: true,
+            color: Some(color(1.0, 1.0, 1.0, 1.0)),
+            text: format!(
+                "plan {} · hit in {:.0} ms · conf {:.2}",
+                p.seq,
+                p.hit_time.secs_since(p.made_at) * 1e3,
+                p.confidence
+            ),
+        });
+        self.out.proto(Topic::Robot, &fm::SceneUpdate { deletions: vec![], entities: vec![bat] }, p.made_at);
+    }
+
+    fn rsi_view(&mut self, r: &RsiRecord) {
+        let Ok(rob) = RobFrame::parse(&r.request[..r.request_len as usize]) else { return };
+        let Some(actual) = rob.rist else { return };
+        if self.start_pose.is_none() {
+            self.start_pose = Some(actual);
+        }
+        let to_t = |k: &KukaPose| self.cal.robot.b_to_t(Vec3::new(k.x, k.y, k.z) * 1e-3);
+        if self.trail.len() == TCP_TRAIL {
+            self.trail.pop_front();
+        }
+        self.trail.push_back((r.arrival, to_t(&actual)));
+        self.judge(r.arrival);
+        self.rsi_count += 1;
+        if !self.rsi_count.is_multiple_of(TCP_DECIMATION)
+            || !(self.out.wants(Topic::Tcp) || self.out.wants(Topic::Robot))
+        {
+            return;
+        }
+        let commanded = rob.rsol.or_else(|| {
+            let sen = SenFrame::parse(&r.answer[..r.answer_len as usize]).ok()?;
+            let (k, s) = (sen.rkorr?, self.start_pose?);
+            Some(KukaPose::from_array(std::array::from_fn(|i| s.to_array()[i] + k.to_array()[i])))
+        });
+        let kpose = |k: &KukaPose| {
+            pose(Vec3::new(k.x, k.y, k.z) * 1e-3, quat_zyx(k.a.to_radians(), k.b.to_radians(), k.c.to_radians()))
+        };
+        let ts = Some(stamp(self.out.wall(r.arrival)));
+        let mut poses = vec![kpose(&actual)];
+        poses.extend(commanded.as_ref().map(kpose));
+        self.out.proto(Topic::Tcp, &fm::PosesInFrame { timestamp: ts, frame_id: FRAME_BASE.into(), poses }, r.arrival);
+        let mut entities = Vec::with_capacity(2);
+        for (id, k, c) in [
+            ("tcp_actual", Some(actual), color(0.1, 1.0, 0.3, 1.0)),
+            ("tcp_commanded", commanded, color(1.0, 0.2, 0.8, 0.6)),
+        ] {
+            let Some(k) = k else { continue };
+            let mut e = self.entity(r.arrival, FRAME_BASE, id);
+            e.cylinders.push(fm::CylinderPrimitive {
+                pose: Some(kpose(&k)),
+                size: Some(v3(Vec3::new(2.0 * BAT_RADIUS, 2.0 * BAT_RADIUS, 0.008))),
+                bottom_scale: 1.0,
+                top_scale: 1.0,
+                color: Some(c),
+            });
+            entities.push(e);
+        }
+        self.out.proto(Topic::Robot, &fm::SceneUpdate { deletions: vec![], entities }, r.arrival);
+    }
+
+    /// The demo's verdicts, once the actual TCP has passed each true hit.
+    fn judge(&mut self, now: Instant) {
+        let Some(hits) = self.truth.as_ref().and_then(|t| t.get()) else { return };
+        while let Some(h) = hits.get(self.judged).copied() {
+            if now < h.t + topspin_core::plan::HIT_WINDOW + Duration::from_millis(20) {
+                return;
+            }
+            self.judged += 1;
+            let closest = self
+                .trail
+                .iter()
+                .filter(|(t, _)| t.0.abs_diff(h.t.0) <= topspin_core::plan::HIT_WINDOW.0)
+                .map(|(t, p)| (p - (h.pos + h.vel * t.secs_since(h.t))).norm())
+                .min_by(f64::total_cmp);
+            let hit = closest.is_some_and(|d| d <= topspin_core::plan::HIT_RADIUS);
+            let (text, c) = match (h.reachable, closest) {
+                (false, _) => (format!("ball {}: out of reach", h.ball), color(0.6, 0.6, 0.6, 1.0)),
+                (true, Some(d)) if hit => {
+                    (format!("ball {}: HIT {:.0} mm", h.ball, d * 1e3), color(0.1, 1.0, 0.2, 1.0))
+                }
+                (true, Some(d)) => (format!("ball {}: MISS {:.0} mm", h.ball, d * 1e3), color(1.0, 0.15, 0.1, 1.0)),
+                (true, None) => (format!("ball {}: MISS (no TCP)", h.ball), color(1.0, 0.15, 0.1, 1.0)),
+            };
+            let mut e = self.entity(h.t, FRAME_TABLE, &format!("verdict/{}", h.ball));
+            e.lifetime = Some(fm::Duration::saturating_from_secs_f64(3.0));
+            e.spheres.push(fm::SpherePrimitive {
+                pose: Some(pose(h.pos, IDENTITY)),
+                size: Some(v3(Vec3::repeat(2.0 * topspin_core::plan::HIT_RADIUS))),
+                color: Some(color(c.r, c.g, c.b, 0.3)),
+            });
+            e.texts.push(fm::TextPrimitive {
+                pose: Some(pose(h.pos + Vec3::new(0.0, 0.0, 0.2), IDENTITY)),
+                billboard: true,
+                font_size: 18.0,
+                scale_invariant: true,
+                color: Some(c),
+                text,
+            });
+            self.out.proto(Topic::Verdict, &fm::SceneUpdate { deletions: vec![], entities: vec![e] }, h.t);
+        }
+    }
+
+    fn rsi_event(&mut self, ev: &SessionEvent) {
+        match ev {
+            SessionEvent::ControllerLate { delay } => self.rsi.controller_late = *delay,
+            SessionEvent::SlowAnswer { .. } => self.rsi.slow_answers += 1,
+            SessionEvent::PlanAccepted { late_by, .. } if late_by.0 > 0 => self.rsi.plans_late += 1,
+            SessionEvent::PlanRejected { .. } => self.rsi.plans_rejected += 1,
+            _ => {}
+        }
+    }
+}
+
+impl TelemetrySink for ViewerSink {
+    fn datagram(&mut self, d: &DatagramRecord) {
+        if let Some(r) = self.out.recording.as_mut() {
+            r.datagram(d);
+        }
+    }
+
+    fn plan(&mut self, p: &StrikePlan) {
+        if let Some(r) = self.out.recording.as_mut() {
+            r.plan(p);
+        }
+        self.plan_view(p);
+    }
+
+    fn rsi(&mut self, x: &RsiRecord) {
+        if let Some(r) = self.out.recording.as_mut() {
+            r.rsi(x);
+        }
+        self.rsi_view(x);
+    }
+
+    fn event(&mut self, e: &Telemetry) {
+        match e {
+            Telemetry::Observed { capture, pos, track } => {
+                self.tick(*capture);
+                self.observed(*capture, *pos, *track);
+            }
+            Telemetry::Estimator(EstimatorEvent::Rejected { t, .. }) => self.ball.rejected_t = Some(*t),
+            Telemetry::Estimator(EstimatorEvent::Ended { t, .. }) => {
+                self.end_ball(Instant::from_secs_f64(*t));
+                self.ball.trajectory = None;
+            }
+            Telemetry::Rsi(ev) => self.rsi_event(ev),
+            Telemetry::Answer { arrival, sent } => {
+                self.rsi.latency_us = ((*sent - *arrival).0 / 1000).max(1);
+                let plot = self.rsi;
+                self.out.json(Topic::Rsi, &plot, *arrival);
+            }
+            _ => {}
+        }
+    }
+
+    fn logo(&mut self, l: &LogoRecord) {
+        let ts = Some(stamp(self.out.wall(l.capture)));
+        let side = LOGO_CROP_SIDE as u16;
+        let (w, h) = (l.width.min(side), l.height.min(side));
+        let n = w as usize * h as usize * 3;
+        let image = fm::RawImage {
+            timestamp: ts,
+            frame_id: "logo_crop".into(),
+            width: w as u32,
+            height: h as u32,
+            encoding: "rgb8".into(),
+            step: w as u32 * 3,
+            data: foxglove::bytes::Bytes::copy_from_slice(&l.pixels[..n]),
+        };
+        self.out.proto(Topic::LogoCrop, &image, l.capture);
+        let mut ann = fm::ImageAnnotations { timestamp: ts, ..Default::default() };
+        let [u, v, r] = l.ball_px.map(f64::from);
+        ann.circles.push(fm::CircleAnnotation {
+            timestamp: ts,
+            position: Some(fm::Point2 { x: u, y: v }),
+            diameter: 2.0 * r,
+            thickness: 1.0,
+            fill_color: Some(color(0.0, 0.0, 0.0, 0.0)),
+            outline_color: Some(color(0.2, 0.9, 1.0, 1.0)),
+            ..Default::default()
+        });
+        if let Some([lu, lv]) = l.logo_px {
+            ann.circles.push(fm::CircleAnnotation {
+                timestamp: ts,
+                position: Some(fm::Point2 { x: lu.into(), y: lv.into() }),
+                diameter: 6.0,
+                thickness: 1.0,
+                fill_color: Some(color(1.0, 0.1, 0.1, 1.0)),
+                outline_color: Some(color(1.0, 1.0, 1.0, 1.0)),
+                ..Default::default()
+            });
+        }
+        self.out.proto(Topic::LogoFit, &ann, l.capture);
+        if let (Some(d), Some(p)) = (l.logo_dir, self.ball.last_pos) {
+            let mut e = self.entity(l.capture, FRAME_TABLE, "logo");
+            e.arrows.push(fm::ArrowPrimitive {
+                pose: Some(pose(p, quat_x_to(Vec3::from(d)))),
+                shaft_length: 0.04,
+                shaft_diameter: 0.004,
+                head_length: 0.015,
+                head_diameter: 0.01,
+                color: Some(color(1.0, 0.1, 0.1, 1.0)),
+            });
+            self.out.proto(Topic::Ball, &fm::SceneUpdate { deletions: vec![], entities: vec![e] }, l.capture);
+        }
+    }
+
+    fn queues(&mut self, q: &QueueDepths, at: Instant) {
+        self.tick(at);
+        self.out.json(Topic::Queues, q, at);
+    }
+
+    fn counters(&mut self, json: &serde_json::Value, at: Instant) {
+        if let Some(r) = self.out.recording.as_mut() {
+            r.counters(json, at);
+        }
+    }
+
+    fn flush(&mut self) {
+        if let Some(r) = self.out.recording.as_mut() {
+            r.flush();
+        }
+    }
+}

@@ -1,0 +1,173 @@
+//! Accuracy of the streaming estimator on simulated balls back to back
+//! (issue 3): the plan's hitting point and time against the truth as a
+//! function of the time left before the hit, beside the batch fit on the
+//! same observations, and at the moment the ball crosses the net.
+
+use serde::Serialize;
+
+use topspin_core::stats::Summary;
+use topspin_core::calib::Calibration;
+use topspin_core::estimator::{Estimator, EstimatorConfig, SpinSource};
+use topspin_core::fit::{FitConfig, Method, Sample, fit_trajectory};
+use topspin_core::physics::Vec3;
+use topspin_core::plan::StrikePlan;
+use topspin_sim::{Setting, SimBall, TrackerModel, schedule, simulate_ball};
+use topspin_core::time::Instant;
+
+/// How the stream is made.
+#[derive(Copy, Clone, Debug, PartialEq, Serialize)]
+pub struct StreamSetup {
+    pub balls: usize,
+    pub seed: u64,
+    pub noise_mm: f64,
+    pub dropout: f64,
+    /// Every this many balls has two false detections at its start.
+    pub outliers_every: usize,
+    /// Launch-to-launch gap, s.
+    pub gap: f64,
+}
+
+impl Default for StreamSetup {
+    fn default() -> Self {
+        StreamSetup { balls: 90, seed: 1, noise_mm: 2.0, dropout: 0.05, outliers_every: 4, gap: 1.0 }
+    }
+}
+
+/// Errors at one lead time.
+#[derive(Clone, Debug, Serialize)]
+pub struct LeadRow {
+    /// Time before the true hit, s ("net" rows use the net crossing).
+    pub lead_s: f64,
+    pub source: String,
+    pub hit_err_mm: Summary,
+    pub hit_dt_ms: Summary,
+    /// Balls without a plan (or fit) at that time.
+    pub missing: usize,
+}
+
+/// The whole evaluation.
+#[derive(Clone, Debug, Serialize)]
+pub struct StreamReport {
+    pub setup: StreamSetup,
+    pub balls: usize,
+    /// Balls whose true hitting point lies inside the hitting window (the
+    /// others are rightly withheld and not scored).
+    pub reachable: usize,
+    /// Reachable balls the estimator made at least one plan for.
+    pub tracked: usize,
+    /// Errors of the latest plan made before the true net crossing.
+    pub at_net: Vec<LeadRow>,
+    pub by_lead: Vec<LeadRow>,
+}
+
+/// The simulated balls and their launch times on one clock.
+pub fn simulate_stream(cal: &Calibration, setup: &StreamSetup) -> (Vec<SimBall>, Vec<f64>) {
+    let prop = cal.propagator();
+    let base = TrackerModel { noise_sigma: setup.noise_mm * 1e-3, dropout: setup.dropout, ..TrackerModel::default() };
+    let balls: Vec<SimBall> = (0..setup.balls)
+        .filter_map(|k| {
+            let tracker = if setup.outliers_every > 0 && k % setup.outliers_every == 0 {
+                TrackerModel { false_starts: 2, ..base }
+            } else {
+                base
+            };
+            simulate_ball(setup.seed, k, Setting::ALL[k % 9], &prop, cal.strike.hit_plane_x, &tracker).ok()
+        })
+        .collect();
+    let ends: Vec<f64> = balls.iter().map(|b| b.observations.last().map_or(0.0, |o| o.t)).collect();
+    // Start one second into the clock.
+    let launches = schedule(&ends, setup.gap).into_iter().map(|t| t + 1.0).collect();
+    (balls, launches)
+}
+
+/// Every plan the estimator made, with the ball it was made during.
+pub fn run_estimator(
+    cal: &Calibration,
+    cfg: EstimatorConfig,
+    balls: &[SimBall],
+    launches: &[f64],
+) -> Vec<(usize, StrikePlan)> {
+    let mut est = Estimator::new(cal, cfg);
+    let mut plans = Vec::new();
+    for (k, (ball, &t0)) in balls.iter().zip(launches).enumerate() {
+        for o in &ball.observations {
+            if let Some(p) = est.observe(Instant::from_secs_f64(t0 + o.t), o.pos).plan {
+                plans.push((k, p));
+            }
+        }
+    }
+    plans
+}
+
+fn v3(a: [f64; 3]) -> Vec3 {
+    Vec3::new(a[0], a[1], a[2])
+}
+
+/// Errors (mm, ms) of the latest plan for ball `k` made before `t_abs`.
+fn plan_error(plans: &[(usize, StrikePlan)], k: usize, t_abs: f64, ball: &SimBall, t0: f64) -> Option<(f64, f64)> {
+    let hit = ball.truth.hit.as_ref()?;
+    let p = plans.iter().rev().find(|(b, p)| *b == k && p.made_at.as_secs_f64() <= t_abs)?.1;
+    let err = (p.position - v3(hit.pos)).norm() * 1e3;
+    let dt = (p.hit_time.as_secs_f64() - (t0 + hit.t)).abs() * 1e3;
+    Some((err, dt))
+}
+
+/// Errors (mm, ms) of the batch fit on the observations before `t_rel`.
+fn batch_error(cal: &Calibration, cfg: &FitConfig, ball: &SimBall, t_rel: f64) -> Option<(f64, f64)> {
+    let hit = ball.truth.hit.as_ref()?;
+    let samples: Vec<Sample> =
+        ball.observations.iter().filter(|o| o.t <= t_rel).map(|o| Sample::new(o.t, o.pos)).collect();
+    let fit = fit_trajectory(&samples, &cal.propagator(), cfg).ok()?;
+    let ph = fit.prediction.hit?;
+    Some(((ph.state.pos - v3(hit.pos)).norm() * 1e3, (ph.t - hit.t).abs() * 1e3))
+}
+
+fn row(lead_s: f64, source: &str, errs: Vec<Option<(f64, f64)>>) -> LeadRow {
+    let missing = errs.iter().filter(|e| e.is_none()).count();
+    let (mm, ms): (Vec<f64>, Vec<f64>) = errs.into_iter().flatten().unzip();
+    LeadRow { lead_s, source: source.to_owned(), hit_err_mm: Summary::of(&mm), hit_dt_ms: Summary::of(&ms), missing }
+}
+
+/// Lead times of the table, s before the true hit.
+pub const LEADS: [f64; 6] = [0.5, 0.4, 0.3, 0.2, 0.15, 0.1];
+
+/// Runs the evaluation: EKF (spin as state), EKF with the window fit's
+/// spin, and the batch fits (paper, refined).
+pub fn evaluate(cal: &Calibration, setup: &StreamSetup) -> StreamReport {
+    let (balls, launches) = simulate_stream(cal, setup);
+    let noise = setup.noise_mm * 1e-3;
+    let base = EstimatorConfig::default().with_noise(noise);
+    let ekf = run_estimator(cal, base, &balls, &launches);
+    let window = run_estimator(cal, EstimatorConfig { spin_source: SpinSource::WindowFit, ..base }, &balls, &launches);
+    let paper = FitConfig::new(Method::Paper, cal.strike.hit_plane_x).with_noise(noise);
+    let refined = FitConfig::new(Method::Refined, cal.strike.hit_plane_x).with_noise(noise);
+    let reachable: Vec<bool> = balls.iter().map(|b| topspin_sim::demo::reachable(cal, b)).collect();
+    let tracked = (0..balls.len()).filter(|&k| reachable[k] && ekf.iter().any(|(b, _)| *b == k)).count();
+
+    let at = |when: &dyn Fn(&SimBall) -> Option<f64>| -> [Vec<Option<(f64, f64)>>; 4] {
+        let mut cols: [Vec<Option<(f64, f64)>>; 4] = Default::default();
+        for (k, ball) in balls.iter().enumerate().filter(|(k, _)| reachable[*k]) {
+            let t0 = launches[k];
+            let Some(t_rel) = when(ball) else {
+                cols.iter_mut().for_each(|c| c.push(None));
+                continue;
+            };
+            cols[0].push(plan_error(&ekf, k, t0 + t_rel, ball, t0));
+            cols[1].push(plan_error(&window, k, t0 + t_rel, ball, t0));
+            cols[2].push(batch_error(cal, &paper, ball, t_rel));
+            cols[3].push(batch_error(cal, &refined, ball, t_rel));
+        }
+        cols
+    };
+    const SOURCES: [&str; 4] = ["ekf", "ekf+window-fit spin", "batch paper", "batch refined"];
+    let rows = |lead: f64, cols: [Vec<Option<(f64, f64)>>; 4]| -> Vec<LeadRow> {
+        cols.into_iter().zip(SOURCES).map(|(c, s)| row(lead, s, c)).collect()
+    };
+    let at_net = rows(f64::NAN, at(&|b: &SimBall| b.truth.net_crossing_t));
+    let mut by_lead = Vec::new();
+    for lead in LEADS {
+        by_lead.extend(rows(lead, at(&|b: &SimBall| b.truth.hit.as_ref().map(|h| h.t - lead))));
+    }
+    let reachable = reachable.iter().filter(|r| **r).count();
+    StreamReport { setup: *setup, balls: balls.len(), reachable, tracked, at_net, by_lead }
+}

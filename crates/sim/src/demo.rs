@@ -1,0 +1,484 @@
+//! `topspin demo`: all of it on loopback in one process — the simulated
+//! tracker streaming launcher balls (TTB1 over UDP), the real daemon threads,
+//! and the mock KR C4 answering every 4 ms — then each stroke judged
+//! against the ground truth: the bat centre (the mock's actual TCP path, in
+//! the table frame) must pass within [`HIT_RADIUS`] of the true ball centre
+//! within ±[`HIT_WINDOW`] of the true crossing of the hitting plane.
+//!
+//! With `runtime.logo` set, the ceiling camera is simulated too: each
+//! ball's crossing of the camera's strip is rendered beforehand and its
+//! crops are streamed as TTI1 datagrams, interleaved in time with the
+//! tracker's, to the daemon's logo thread.
+//!
+//! Balls whose true hitting point lies outside the hitting window
+//! (`calib/strike.toml`) cannot be reached; they are reported, and the hit
+//! rate is over the reachable ones.
+
+use std::net::{SocketAddr, UdpSocket};
+use std::path::PathBuf;
+use std::sync::atomic::AtomicBool;
+
+use serde::Serialize;
+
+use topspin_core::calib::Calibration;
+use topspin_core::calib::camera::CameraCalib;
+use topspin_core::stats::Summary;
+use topspin_core::ingest::IngestCounters;
+use topspin_core::logo::stream::LogoCounters;
+use crate::mock_krc::{self, MockKrcConfig};
+use topspin_core::physics::{Vec3, rad_to_rps};
+use topspin_core::plan::StrikePlan;
+use crate::render::{BallColour, Scene, Sequence, SequenceOptions, render_sequence};
+use topspin_daemon::runtime::daemon::{Daemon, DaemonSummary, LinkState, RuntimeConfig};
+pub use topspin_daemon::runtime::telemetry::{Latencies, Latency};
+use topspin_daemon::clock;
+use crate::faults::{InjectedCounts, TrackerFaults, inject, plan_datagrams, send_planned};
+use crate::stream::{capture_time, stream};
+use crate::{SimBall, TrackerModel, schedule, true_state_at};
+use topspin_core::time::{Duration, Instant};
+use topspin_core::wire::crop::{CROP_MAX_LEN, Crop};
+
+pub use topspin_core::plan::{HIT_RADIUS, HIT_WINDOW};
+/// Time from the daemon's start to the first launch, s.
+pub const LEAD_IN: f64 = 0.5;
+
+/// How the demo runs.
+#[derive(Clone, Debug, PartialEq)]
+pub struct DemoConfig {
+    pub balls: usize,
+    pub seed: u64,
+    pub tracker: TrackerModel,
+    /// Launch-to-launch gap, s.
+    pub gap: f64,
+    pub runtime: RuntimeConfig,
+    /// The mock's answer deadline; `None`: the controller's (one cycle).
+    /// Tests on a shared machine stretch it so that the machine's own
+    /// scheduling noise is counted (`answers_after_cycle`), not failed.
+    pub answer_deadline: Option<Duration>,
+    /// Serve the live Foxglove view here (see [`topspin_daemon::viewer`]).
+    pub live: Option<SocketAddr>,
+    /// Before the first ball, wait up to this long for a live client (then
+    /// [`LIVE_SETTLE`] for its subscriptions).
+    pub live_wait: Duration,
+    /// Record the session (MCAP, with the viewer's channels) to this file.
+    pub record: Option<PathBuf>,
+    /// The mock's late-answer limit before it stops RSI; `None`: the
+    /// controller's (the context's Timeout). A soak raises it so that a
+    /// long run counts every late answer instead of stopping at the limit.
+    pub late_limit: Option<u64>,
+    /// Tracker-side faults injected into the stream (`sim::faults`); the
+    /// foreign ball comes from 127.0.0.2.
+    pub tracker_faults: Option<TrackerFaults>,
+}
+
+/// After a live client connects, time given it to subscribe.
+pub const LIVE_SETTLE: Duration = Duration::from_millis(500);
+
+impl Default for DemoConfig {
+    fn default() -> Self {
+        DemoConfig {
+            balls: 9,
+            seed: 1,
+            tracker: TrackerModel::default(),
+            gap: 1.5,
+            runtime: RuntimeConfig::loopback(),
+            answer_deadline: None,
+            live: None,
+            live_wait: Duration::from_nanos(0),
+            record: None,
+            late_limit: None,
+            tracker_faults: None,
+        }
+    }
+}
+
+/// The verdict on one ball.
+#[derive(Clone, Debug, Serialize)]
+pub struct BallVerdict {
+    pub ball: usize,
+    pub setting: String,
+    pub true_spin_rps: [f64; 3],
+    pub estimated_spin_rps: Option<[f64; 3]>,
+    pub spin_err_pct: Option<f64>,
+    /// Closest approach of the bat centre to the ball within the window, mm.
+    pub hit_err_mm: Option<f64>,
+    /// Where a miss comes from: the last plan's hitting point against the
+    /// true one (mm) and its hitting time against the true one (ms) —
+    /// estimation; and the bat at the plan's hitting time against the
+    /// plan's point (mm) — execution.
+    pub plan_err_mm: Option<f64>,
+    pub plan_dt_ms: Option<f64>,
+    pub tracking_err_mm: Option<f64>,
+    /// The true hitting point lies inside the hitting window.
+    pub reachable: bool,
+    pub hit: bool,
+}
+
+/// The demo's result.
+#[derive(Clone, Debug, Serialize)]
+pub struct DemoReport {
+    pub balls: usize,
+    pub reachable: usize,
+    pub hits: usize,
+    /// Hits over reachable balls.
+    pub hit_rate: f64,
+    pub late_rsi_answers: u64,
+    /// Answers accepted under a stretched deadline that came later than
+    /// one cycle (0 unless `answer_deadline` was stretched).
+    pub answers_after_cycle: u64,
+    pub rsi_cycles: u64,
+    pub spin_err_pct_median: f64,
+    pub hit_err_mm_median: f64,
+    pub latency_us: Latencies,
+    pub ended_home: bool,
+    /// Plans the RSI loop took that arrive late (and the worst, ms), and
+    /// plans it refused.
+    pub plans_late: u64,
+    pub late_by_max_ms: f64,
+    pub plans_rejected: u64,
+    /// The logo thread's counters (with `runtime.logo`), and the logo
+    /// spins the estimator fused or refused.
+    pub logo: Option<LogoCounters>,
+    pub logo_spins_fused: u64,
+    pub logo_spins_gated: u64,
+    pub warnings: Vec<String>,
+    /// The daemon's tracker ingest counters (foreign, malformed, …).
+    pub ingest: IngestCounters,
+    /// What the tracker fault injector did (`None`: a clean stream).
+    pub tracker_faults: Option<InjectedCounts>,
+    /// Corrections the mock KR C4 had to clamp (POSCORR) or slow down to
+    /// the robot's limits, and whether its monitor stopped RSI: all zero
+    /// and false unless the daemon commanded something out of bounds.
+    pub poscorr_clamped: u64,
+    pub robot_limited: u64,
+    pub stopped_by_monitor: bool,
+    pub per_ball: Vec<BallVerdict>,
+}
+
+/// The ball's true hitting point lies in the hitting window.
+pub fn reachable(cal: &Calibration, ball: &SimBall) -> bool {
+    ball.truth.hit.as_ref().is_some_and(|h| cal.strike.in_window(h.pos[1], h.pos[2]))
+}
+
+/// What one loopback session produced, before judging.
+#[derive(Debug)]
+pub struct LoopbackRun {
+    pub balls: Vec<SimBall>,
+    /// Launch of ball k, s after `t0`.
+    pub starts: Vec<f64>,
+    pub t0: Instant,
+    pub mock: mock_krc::MockResult,
+    pub daemon: DaemonSummary,
+    pub injected: Option<InjectedCounts>,
+}
+
+/// Runs the demo end to end and judges every stroke.
+pub fn run(cfg: &DemoConfig, cal: &Calibration) -> std::io::Result<DemoReport> {
+    let r = run_loopback(cfg, cal)?;
+    let mut report = judge(cal, &r.balls, &r.starts, r.t0, &r.mock, &r.daemon);
+    report.tracker_faults = r.injected;
+    Ok(report)
+}
+
+/// The simulated tracker, the daemon threads and the mock KR C4 on
+/// loopback for `cfg.balls` balls; the bat brought home at the end.
+pub fn run_loopback(cfg: &DemoConfig, cal: &Calibration) -> std::io::Result<LoopbackRun> {
+    let balls = crate::simulate_set(cal, cfg.seed, cfg.balls, &cfg.tracker);
+    let ends: Vec<f64> = balls.iter().map(|b| b.truth.end_t).collect();
+    let starts = schedule(&ends, cfg.gap);
+
+    let mut rcfg = cfg.runtime.clone();
+    let crops = rcfg.logo.as_mut().map(|l| {
+        l.camera_latency = Duration::from_nanos((cfg.tracker.latency * 1e9) as u64);
+        render_crops(cal, &l.camera, cfg.seed, &balls)
+    });
+    // The simulated tracker's capture-to-arrival latency is known here; on
+    // the robot it is measured once and configured (tracker.fixed_latency_ms).
+    // Through the daemon configuration (what a recording carries), so that
+    // `topspin replay` of a demo recording sets up the same estimator.
+    let dcfg = demo_daemon_config(cfg);
+    rcfg.tracker_noise = dcfg.tracker_noise_m();
+    rcfg.tracker_fixed_latency = Duration::from_nanos(dcfg.fixed_latency_ns());
+    let truth = topspin_daemon::viewer::DemoTruth::default();
+    let sink = viewer_sink(cfg, &mut rcfg, cal, &truth)?;
+    let daemon = Daemon::start(&rcfg, cal, sink)?;
+    let mut mcfg = MockKrcConfig::default_cell().map_err(|e| std::io::Error::other(e.to_string()))?;
+    mcfg.sensor = daemon.rsi_addr;
+    mcfg.bind = "127.0.0.1:0".parse().expect("literal");
+    mcfg.cycles = None;
+    mcfg.seed = cfg.seed;
+    if let Some(d) = cfg.answer_deadline {
+        mcfg.answer_deadline = d;
+    }
+    if let Some(n) = cfg.late_limit {
+        mcfg.controller.late_limit = n;
+    }
+    let mock = mock_krc::spawn(mcfg)?;
+
+    let tracker = UdpSocket::bind("127.0.0.1:0")?;
+    tracker.connect(daemon.tracker_addr)?;
+    let t0 = clock::now() + Duration::from_nanos((LEAD_IN * 1e9) as u64);
+    let _ = truth.set(
+        balls
+            .iter()
+            .zip(&starts)
+            .filter_map(|(b, &start)| {
+                let h = b.truth.hit.as_ref()?;
+                Some(topspin_daemon::viewer::sink::TrueHit {
+                    ball: b.index,
+                    t: capture_time(t0, start, h.t),
+                    pos: Vec3::from(h.pos),
+                    vel: Vec3::from(h.vel),
+                    reachable: reachable(cal, b),
+                })
+            })
+            .collect(),
+    );
+    let camera = match (daemon.crops_addr, &crops) {
+        (Some(addr), Some(seqs)) => {
+            let socket = UdpSocket::bind("127.0.0.1:0")?;
+            socket.connect(addr)?;
+            let (starts, latency, seqs) = (starts.clone(), cfg.tracker.latency, seqs.clone());
+            Some(std::thread::spawn(move || stream_crops(&socket, &seqs, &starts, latency, t0)))
+        }
+        _ => None,
+    };
+    let never = AtomicBool::new(false);
+    let injected = match &cfg.tracker_faults {
+        None => {
+            stream(&tracker, &balls, &starts, cfg.tracker.latency, t0, &never)?;
+            None
+        }
+        Some(f) => {
+            let clean = plan_datagrams(&balls, &starts, cfg.tracker.latency, t0);
+            let (plan, counts) = inject(&clean, f, cfg.seed);
+            // Another loopback address: not the configured tracker source.
+            let foreign = UdpSocket::bind("127.0.0.2:0")?;
+            foreign.connect(daemon.tracker_addr)?;
+            send_planned(&tracker, Some(&foreign), &plan, &never)?;
+            Some(counts)
+        }
+    };
+    if let Some(c) = camera {
+        c.join().map_err(|_| std::io::Error::other("crop stream panicked"))??;
+    }
+    // Let the last stroke finish and the bat come home.
+    let last_end = starts.last().copied().unwrap_or(0.0) + ends.last().copied().unwrap_or(0.0);
+    let until = capture_time(t0, last_end, 0.6);
+    clock::sleep_until(until, Duration::from_micros(0));
+    daemon.request_stop();
+    let drain_start = clock::now();
+    let mut home_since: Option<Instant> = None;
+    loop {
+        let now = clock::now();
+        if daemon.link_state() == LinkState::Home {
+            if now - *home_since.get_or_insert(now) >= Duration::from_millis(200) {
+                break;
+            }
+        } else {
+            home_since = None;
+        }
+        if now - drain_start > Duration::from_millis(5000) {
+            break;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(2));
+    }
+    let mock = mock.stop()?;
+    let daemon = daemon.join()?;
+    Ok(LoopbackRun { balls, starts, t0, mock, daemon, injected })
+}
+
+/// The daemon configuration the demo amounts to (tracker noise and latency).
+fn demo_daemon_config(cfg: &DemoConfig) -> topspin_daemon::config::DaemonConfig {
+    let mut d = topspin_daemon::config::DaemonConfig::default();
+    d.tracker.noise_mm = cfg.tracker.noise_sigma.max(1e-4) * 1e3;
+    d.tracker.fixed_latency_ms = cfg.tracker.latency * 1e3;
+    d
+}
+
+/// The telemetry sink for `--live` and/or `--record`: the viewer (with
+/// the demo's truth for its verdicts) and the recording; RSI bytes are
+/// pushed to telemetry then (the TCP in the view).
+fn viewer_sink(
+    cfg: &DemoConfig,
+    rcfg: &mut RuntimeConfig,
+    cal: &Calibration,
+    truth: &topspin_daemon::viewer::DemoTruth,
+) -> std::io::Result<Option<Box<dyn topspin_daemon::runtime::telemetry::TelemetrySink>>> {
+    if cfg.live.is_none() && cfg.record.is_none() {
+        return Ok(None);
+    }
+    rcfg.record_rsi = true;
+    let live = match cfg.live {
+        Some(addr) => {
+            let server = topspin_daemon::viewer::LiveServer::start(addr, rcfg.telemetry.core).map_err(std::io::Error::other)?;
+            tracing::info!(target: "topspin::viewer", "live view on ws://{}", server.addr());
+            if cfg.live_wait.0 > 0 {
+                let until = clock::now() + cfg.live_wait;
+                while server.clients() == 0 && clock::now() < until {
+                    std::thread::sleep(std::time::Duration::from_millis(20));
+                }
+                if server.clients() > 0 {
+                    std::thread::sleep(std::time::Duration::from_nanos(LIVE_SETTLE.0));
+                }
+            }
+            Some(server)
+        }
+        None => None,
+    };
+    let recording = match &cfg.record {
+        Some(path) => {
+            let files = topspin_daemon::record::calib_files(None).map_err(std::io::Error::other)?;
+            let rec = topspin_daemon::record::Recorder::create(path, &demo_daemon_config(cfg), &files)
+                .map_err(std::io::Error::other)?;
+            Some(topspin_daemon::record::sink::RecordingSink::new(rec))
+        }
+        None => None,
+    };
+    Ok(Some(Box::new(topspin_daemon::viewer::ViewerSink::new(cal, live, recording, Some(truth.clone())))))
+}
+
+/// The last plan of the trajectory whose hit is nearest the true one.
+fn matching_plan(plans: &[StrikePlan], t_hit: Instant) -> Option<&StrikePlan> {
+    plans.iter().filter(|p| p.hit_time.0.abs_diff(t_hit.0) < 50_000_000).min_by_key(|p| p.hit_time.0.abs_diff(t_hit.0))
+}
+
+fn judge(
+    cal: &Calibration,
+    balls: &[SimBall],
+    starts: &[f64],
+    t0: Instant,
+    mock: &mock_krc::MockResult,
+    summary: &DaemonSummary,
+) -> DemoReport {
+    let prop = cal.propagator();
+    let robot = &cal.robot;
+    let mut per_ball = Vec::new();
+    for (k, ball) in balls.iter().enumerate() {
+        let truth = &ball.truth;
+        let true_spin = Vec3::new(truth.spin[0], truth.spin[1], truth.spin[2]);
+        let reachable = reachable(cal, ball);
+        let Some(hit) = truth.hit.as_ref() else { continue };
+        let t_hit = capture_time(t0, starts[k], hit.t);
+        let launch = truth.to_launch();
+        let closest = mock
+            .path
+            .iter()
+            .filter(|s| s.t.0.abs_diff(t_hit.0) <= HIT_WINDOW.0)
+            .map(|s| {
+                let bat = robot.b_to_t(Vec3::new(s.actual[0], s.actual[1], s.actual[2]) * 1e-3);
+                let ball_at = true_state_at(&launch, &prop, s.t.secs_since(t0) - starts[k]).pos;
+                (bat - ball_at).norm()
+            })
+            .min_by(f64::total_cmp);
+        let plan = matching_plan(&summary.telemetry.last_plans, t_hit);
+        let est = plan.map(|p| p.spin);
+        let true_hit = Vec3::new(hit.pos[0], hit.pos[1], hit.pos[2]);
+        let bat_at = |t: Instant| {
+            mock.path
+                .iter()
+                .min_by_key(|s| s.t.0.abs_diff(t.0))
+                .map(|s| robot.b_to_t(Vec3::new(s.actual[0], s.actual[1], s.actual[2]) * 1e-3))
+        };
+        let tracking_err_mm = plan.and_then(|p| bat_at(p.hit_time).map(|b| (b - p.position).norm() * 1e3));
+        per_ball.push(BallVerdict {
+            ball: k,
+            setting: truth.setting.to_string(),
+            true_spin_rps: true_spin.map(rad_to_rps).into(),
+            estimated_spin_rps: est.map(|w| w.map(rad_to_rps).into()),
+            spin_err_pct: est.map(|w| (w - true_spin).norm() / true_spin.norm() * 100.0),
+            hit_err_mm: closest.map(|d| d * 1e3),
+            plan_err_mm: plan.map(|p| (p.position - true_hit).norm() * 1e3),
+            plan_dt_ms: plan.map(|p| p.hit_time.secs_since(t_hit) * 1e3),
+            tracking_err_mm,
+            reachable,
+            hit: closest.is_some_and(|d| d <= HIT_RADIUS),
+        });
+    }
+    let reach: Vec<&BallVerdict> = per_ball.iter().filter(|b| b.reachable).collect();
+    let hits = reach.iter().filter(|b| b.hit).count();
+    let spin: Vec<f64> = reach.iter().filter_map(|b| b.spin_err_pct).collect();
+    let hit_err: Vec<f64> = reach.iter().filter_map(|b| b.hit_err_mm).collect();
+    DemoReport {
+        balls: balls.len(),
+        reachable: reach.len(),
+        hits,
+        hit_rate: if reach.is_empty() { 0.0 } else { hits as f64 / reach.len() as f64 },
+        late_rsi_answers: mock.late,
+        answers_after_cycle: mock.answers_after_cycle,
+        rsi_cycles: mock.cycles,
+        spin_err_pct_median: Summary::of(&spin).median,
+        hit_err_mm_median: Summary::of(&hit_err).median,
+        latency_us: Latencies::of(&summary.telemetry),
+        ended_home: summary.ended_home,
+        plans_late: summary.telemetry.plans_late,
+        late_by_max_ms: summary.telemetry.late_by_max_ms,
+        plans_rejected: summary.telemetry.plans_rejected,
+        logo: summary.logo,
+        logo_spins_fused: summary.telemetry.logo_spins_fused,
+        logo_spins_gated: summary.telemetry.logo_spins_gated,
+        warnings: summary.warnings.iter().map(|w| w.to_string()).collect(),
+        ingest: summary.ingest,
+        tracker_faults: None,
+        poscorr_clamped: mock.poscorr_clamped,
+        robot_limited: mock.robot_limited,
+        stopped_by_monitor: mock.stopped_by_monitor,
+        per_ball,
+    }
+}
+
+/// Renders each ball's pass through the ceiling camera's strip (orange
+/// ball, the frames before the bounce).
+fn render_crops(cal: &Calibration, cam: &CameraCalib, seed: u64, balls: &[SimBall]) -> Vec<Sequence> {
+    let prop = cal.propagator();
+    let scene = Scene::new(cam.clone(), BallColour::Orange);
+    let opts = SequenceOptions { frames: topspin_core::logo::stream::SEQUENCE_LEN };
+    let render = |b: &SimBall| render_sequence(&scene, &b.truth, &prop, seed, b.index, &opts);
+    // One chunk of balls per core, in order (no thread pool in the sim crate).
+    let workers = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let chunk = balls.len().div_ceil(workers).max(1);
+    std::thread::scope(|s| {
+        let handles: Vec<_> =
+            balls.chunks(chunk).map(|part| s.spawn(move || part.iter().map(render).collect::<Vec<_>>())).collect();
+        handles.into_iter().flat_map(|h| h.join().expect("render thread")).collect()
+    })
+}
+
+/// Sends every rendered crop as a TTI1 datagram at capture + `latency`.
+fn stream_crops(
+    socket: &UdpSocket,
+    seqs: &[Sequence],
+    starts: &[f64],
+    latency: f64,
+    t0: Instant,
+) -> std::io::Result<u64> {
+    let mut items: Vec<(Instant, &crate::render::Frame)> = seqs
+        .iter()
+        .zip(starts)
+        .flat_map(|(s, &start)| s.frames.iter().map(move |f| (capture_time(t0, start, f.label.t), f)))
+        .collect();
+    items.sort_by_key(|(t, _)| t.0);
+    let latency = Duration::from_nanos((latency.max(0.0) * 1e9) as u64);
+    let mut buf = vec![0u8; CROP_MAX_LEN];
+    let mut sent = 0;
+    for (seq, (capture, f)) in items.into_iter().enumerate() {
+        clock::sleep_until(capture + latency, Duration::from_micros(0));
+        let m = f.label.measured;
+        let n = Crop {
+            seq: seq as u32,
+            capture,
+            u: m.u as f32,
+            v: m.v as f32,
+            radius: m.radius as f32,
+            width: f.crop.width as u16,
+            height: f.crop.height as u16,
+            pixels: &f.crop.rgb,
+        }
+        .emit(&mut buf)
+        .map_err(|e| std::io::Error::other(e.to_string()))?;
+        if socket.send(&buf[..n]).is_ok() {
+            sent += 1;
+        }
+    }
+    Ok(sent)
+}

@@ -1,0 +1,201 @@
+//! The controller-side files of `rsi/`, read the way the mock needs them.
+
+use std::net::{IpAddr, SocketAddr};
+
+use topspin_core::rsi::codec::RobElement;
+use topspin_core::rsi::xml::{Scanner, Token, XmlError, attr, trim};
+
+/// `rsi/topspin_ethernet.xml`, compiled in.
+pub const DEFAULT_ETHERNET_XML: &str = include_str!("../../../../rsi/topspin_ethernet.xml");
+/// `rsi/topspin.rsi.xml`, compiled in.
+pub const DEFAULT_CONTEXT_XML: &str = include_str!("../../../../rsi/topspin.rsi.xml");
+
+/// Why a controller-side file cannot be used.
+#[derive(Debug, thiserror::Error)]
+pub enum RsiFileError {
+    #[error("{file}: {source}")]
+    Xml { file: &'static str, source: XmlError },
+    #[error("{file}: missing {what}")]
+    Missing { file: &'static str, what: &'static str },
+    #[error("{file}: bad value for {what}")]
+    Bad { file: &'static str, what: &'static str },
+}
+
+/// The ETHERNET object's configuration.
+#[derive(Clone, Debug, PartialEq)]
+pub struct EthernetConfig {
+    pub ip: IpAddr,
+    pub port: u16,
+    pub sentype: String,
+    pub only_send: bool,
+    /// The SEND list, in order (unknown tags skipped).
+    pub send: Vec<RobElement>,
+    /// The RECEIVE tags, in order.
+    pub receive: Vec<String>,
+}
+
+impl EthernetConfig {
+    pub fn sensor_addr(&self) -> SocketAddr {
+        SocketAddr::new(self.ip, self.port)
+    }
+
+    pub fn parse(text: &str) -> Result<Self, RsiFileError> {
+        const F: &str = "ethernet config";
+        let xml = |source| RsiFileError::Xml { file: F, source };
+        let mut s = Scanner::new(text.as_bytes());
+        let (mut ip, mut port, mut sentype, mut only_send) = (None, None, None, false);
+        let (mut send, mut receive) = (Vec::new(), Vec::new());
+        let mut section = 0u8; // 1 = SEND, 2 = RECEIVE
+        let mut current: &[u8] = b"";
+        while let Some(t) = s.next_token() {
+            match t.map_err(xml)? {
+                Token::Start { name, attrs, .. } => {
+                    match name {
+                        b"SEND" => section = 1,
+                        b"RECEIVE" => section = 2,
+                        b"ELEMENT" => {
+                            let tag = attr(attrs, b"TAG").map_err(xml)?.unwrap_or(b"");
+                            if section == 1 {
+                                if let Some(e) = RobElement::from_def_tag(tag) {
+                                    send.push(e);
+                                }
+                            } else if section == 2 {
+                                receive.push(String::from_utf8_lossy(tag).into_owned());
+                            }
+                        }
+                        _ => {}
+                    }
+                    current = name;
+                }
+                Token::Text(x) => {
+                    let v = String::from_utf8_lossy(trim(x)).into_owned();
+                    match current {
+                        b"IP_NUMBER" => {
+                            ip = Some(v.parse().map_err(|_| RsiFileError::Bad { file: F, what: "IP_NUMBER" })?)
+                        }
+                        b"PORT" => port = Some(v.parse().map_err(|_| RsiFileError::Bad { file: F, what: "PORT" })?),
+                        b"SENTYPE" => sentype = Some(v),
+                        b"ONLYSEND" => only_send = v.eq_ignore_ascii_case("TRUE"),
+                        _ => {}
+                    }
+                    current = b"";
+                }
+                Token::End { .. } => current = b"",
+            }
+        }
+        Ok(EthernetConfig {
+            ip: ip.ok_or(RsiFileError::Missing { file: F, what: "IP_NUMBER" })?,
+            port: port.ok_or(RsiFileError::Missing { file: F, what: "PORT" })?,
+            sentype: sentype.ok_or(RsiFileError::Missing { file: F, what: "SENTYPE" })?,
+            only_send,
+            send,
+            receive,
+        })
+    }
+}
+
+/// The parts of the RSI context the mock models.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ContextConfig {
+    pub config_file: String,
+    /// Late answers before RSI stops (ETHERNET `Timeout`).
+    pub timeout: u32,
+    /// Decimals (ETHERNET `Precision`).
+    pub precision: u8,
+    /// POSCORR: correction limits, mm.
+    pub lower_mm: [f64; 3],
+    pub upper_mm: [f64; 3],
+    /// POSCORR: one total rotation limit, deg.
+    pub max_rot_deg: f64,
+    /// POSCORRMON: total translation / rotation that stop the robot.
+    pub mon_max_trans_mm: f64,
+    pub mon_max_rot_deg: f64,
+}
+
+impl ContextConfig {
+    pub fn parse(text: &str) -> Result<Self, RsiFileError> {
+        const F: &str = "RSI context";
+        let xml = |source| RsiFileError::Xml { file: F, source };
+        let mut s = Scanner::new(text.as_bytes());
+        let mut obj: Vec<u8> = Vec::new();
+        let mut c = ContextConfig {
+            config_file: String::new(),
+            timeout: 100,
+            precision: 4,
+            lower_mm: [f64::NEG_INFINITY; 3],
+            upper_mm: [f64::INFINITY; 3],
+            max_rot_deg: f64::INFINITY,
+            mon_max_trans_mm: f64::INFINITY,
+            mon_max_rot_deg: f64::INFINITY,
+        };
+        let mut seen_ethernet = false;
+        while let Some(t) = s.next_token() {
+            let Token::Start { name, attrs, .. } = t.map_err(xml)? else {
+                continue;
+            };
+            if name == b"RSIObject" {
+                obj = attr(attrs, b"ObjType").map_err(xml)?.unwrap_or(b"").to_ascii_uppercase();
+                seen_ethernet |= obj == b"ETHERNET";
+                continue;
+            }
+            if name != b"Parameter" {
+                continue;
+            }
+            let pname = attr(attrs, b"Name").map_err(xml)?.unwrap_or(b"");
+            let value = attr(attrs, b"ParamValue").map_err(xml)?.unwrap_or(b"");
+            let text = String::from_utf8_lossy(value).into_owned();
+            let num = |what| {
+                text.trim().parse::<f64>().ok().filter(|v| v.is_finite()).ok_or(RsiFileError::Bad { file: F, what })
+            };
+            match (obj.as_slice(), pname) {
+                (b"ETHERNET", b"ConfigFile") => c.config_file = text.clone(),
+                (b"ETHERNET", b"Timeout") => c.timeout = num("Timeout")? as u32,
+                (b"ETHERNET", b"Precision") => c.precision = num("Precision")? as u8,
+                (b"POSCORR", b"LowerLimX") => c.lower_mm[0] = num("LowerLimX")?,
+                (b"POSCORR", b"LowerLimY") => c.lower_mm[1] = num("LowerLimY")?,
+                (b"POSCORR", b"LowerLimZ") => c.lower_mm[2] = num("LowerLimZ")?,
+                (b"POSCORR", b"UpperLimX") => c.upper_mm[0] = num("UpperLimX")?,
+                (b"POSCORR", b"UpperLimY") => c.upper_mm[1] = num("UpperLimY")?,
+                (b"POSCORR", b"UpperLimZ") => c.upper_mm[2] = num("UpperLimZ")?,
+                (b"POSCORR", b"MaxRotAngle") => c.max_rot_deg = num("MaxRotAngle")?,
+                (b"POSCORRMON", b"MaxTrans") => c.mon_max_trans_mm = num("MaxTrans")?,
+                (b"POSCORRMON", b"MaxRotAngle") => c.mon_max_rot_deg = num("MaxRotAngle")?,
+                _ => {}
+            }
+        }
+        if !seen_ethernet {
+            return Err(RsiFileError::Missing { file: F, what: "ETHERNET object" });
+        }
+        if c.precision > topspin_core::rsi::codec::MAX_PRECISION || c.timeout == 0 {
+            return Err(RsiFileError::Bad { file: F, what: "Precision/Timeout" });
+        }
+        Ok(c)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use topspin_core::calib::Calibration;
+
+    #[test]
+    fn the_shipped_files_parse_and_match_the_calibration() {
+        let e = EthernetConfig::parse(DEFAULT_ETHERNET_XML).unwrap();
+        assert_eq!(e.sentype, "ImFree");
+        assert_eq!(e.send.len(), 5);
+        assert_eq!(e.receive.len(), 6);
+        assert!(!e.only_send);
+        let c = ContextConfig::parse(DEFAULT_CONTEXT_XML).unwrap();
+        assert_eq!(c.config_file, "topspin_ethernet.xml");
+        let r = Calibration::default_cell().robot;
+        assert_eq!(c.timeout, r.rsi.late_limit);
+        assert_eq!(c.lower_mm, r.poscorr.lower_xyz_mm);
+        assert_eq!(c.upper_mm, r.poscorr.upper_xyz_mm);
+        assert_eq!(c.max_rot_deg, r.poscorr.max_rot_angle_deg);
+        assert_eq!(c.mon_max_trans_mm, r.poscorr.mon_max_trans_mm);
+        assert_eq!(c.mon_max_rot_deg, r.poscorr.mon_max_rot_deg);
+        let src = include_str!("../../../../rsi/topspin_rsi.src");
+        assert!(src.contains("RSI_ON(#ABSOLUTE, #IPO_FAST)"));
+        assert!(src.contains("PTP {X 350.0, Y 0.0, Z 450.0, A 180.0, B 0.0, C 0.0}"));
+    }
+}

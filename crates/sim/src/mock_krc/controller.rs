@@ -1,0 +1,270 @@
+//! The controller model, sans-IO: one [`MockController::request`] per cycle,
+//! answers offered with [`MockController::answer`], and
+//! [`MockController::end_cycle`] at the cycle's deadline.
+//!
+//! Units are KUKA's (mm, degrees). The correction passes POSCORR (per-axis
+//! translation limits, one total rotation limit), POSCORRMON (total
+//! translation/rotation: exceeding it stops RSI), then the robot follows
+//! the commanded pose within its own per-axis velocity and acceleration
+//! limits. A late cycle keeps the last correction (HOLDON).
+
+#![allow(clippy::needless_range_loop)] // parallel per-axis arrays
+
+use topspin_core::rsi::codec::{CodecError, KukaPose, RobElement, RobFrame, SenFrame};
+use topspin_core::time::Instant;
+
+/// How RKorr is applied.
+#[derive(Copy, Clone, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum CorrMode {
+    /// RKorr = commanded pose − pose at RSI start.
+    Absolute,
+    /// RKorr = increment added each cycle.
+    Relative,
+}
+
+/// Why RSI stopped.
+#[derive(Copy, Clone, Debug, PartialEq, Eq)]
+pub enum StopReason {
+    /// More late answers than the Timeout allows.
+    LateLimit,
+    /// POSCORRMON: total correction too large.
+    Monitor,
+}
+
+/// What became of an offered answer.
+#[derive(Copy, Clone, Debug, PartialEq, Eq)]
+pub enum Verdict {
+    /// Right IPOC and type: this cycle's correction.
+    Accepted,
+    /// An IPOC other than this cycle's (stale, duplicate or invented).
+    WrongIpoc,
+    /// `Type` other than SENTYPE.
+    WrongType,
+    /// Not a `<Sen>` datagram.
+    Malformed(CodecError),
+    /// This cycle already has its answer.
+    Extra,
+}
+
+/// The controller's fixed setup.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ControllerConfig {
+    pub cycle_ms: u32,
+    pub mode: CorrMode,
+    pub sentype: String,
+    pub precision: u8,
+    pub send: Vec<RobElement>,
+    /// Late answers before RSI stops.
+    pub late_limit: u64,
+    /// The pose at RSI start (mm, deg, BASE).
+    pub start: [f64; 6],
+    /// The robot's own limits per Cartesian axis (mm/s, deg/s; /s²).
+    pub vmax: [f64; 6],
+    pub amax: [f64; 6],
+    /// POSCORR and POSCORRMON.
+    pub lower_mm: [f64; 3],
+    pub upper_mm: [f64; 3],
+    pub max_rot_deg: f64,
+    pub mon_max_trans_mm: f64,
+    pub mon_max_rot_deg: f64,
+    /// First IPOC.
+    pub first_ipoc: u64,
+}
+
+/// One cycle of the logged TCP path.
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub struct PathSample {
+    /// When the robot is at `actual`.
+    pub t: Instant,
+    pub ipoc: u64,
+    /// Commanded pose after POSCORR (mm, deg, BASE).
+    pub commanded: [f64; 6],
+    /// Where the robot is (after its own limits).
+    pub actual: [f64; 6],
+    /// This cycle's answer came on time.
+    pub on_time: bool,
+    /// The robot's own velocity/acceleration limits bent the command.
+    pub robot_limited: bool,
+}
+
+/// The controller (see the module doc).
+#[derive(Clone, Debug)]
+pub struct MockController {
+    cfg: ControllerConfig,
+    ipoc: u64,
+    correction: [f64; 6],
+    commanded: [f64; 6],
+    actual: [f64; 6],
+    velocity: [f64; 6],
+    answered: Option<[f64; 6]>,
+    pub late: u64,
+    pub wrong_ipoc: u64,
+    pub wrong_type: u64,
+    pub malformed: u64,
+    pub poscorr_clamped: u64,
+    pub robot_limited: u64,
+    pub cycles: u64,
+    pub stopped: Option<StopReason>,
+}
+
+impl MockController {
+    pub fn new(cfg: ControllerConfig) -> Self {
+        MockController {
+            ipoc: cfg.first_ipoc,
+            correction: [0.0; 6],
+            commanded: cfg.start,
+            actual: cfg.start,
+            velocity: [0.0; 6],
+            answered: None,
+            late: 0,
+            wrong_ipoc: 0,
+            wrong_type: 0,
+            malformed: 0,
+            poscorr_clamped: 0,
+            robot_limited: 0,
+            cycles: 0,
+            stopped: None,
+            cfg,
+        }
+    }
+
+    pub fn config(&self) -> &ControllerConfig {
+        &self.cfg
+    }
+
+    pub fn ipoc(&self) -> u64 {
+        self.ipoc
+    }
+
+    pub fn actual(&self) -> [f64; 6] {
+        self.actual
+    }
+
+    /// Writes this cycle's `<Rob>` into `buf`.
+    pub fn request(&self, buf: &mut [u8]) -> Result<usize, CodecError> {
+        let pose = KukaPose::from_array(self.actual);
+        let axes = [0.0, -90.0, 90.0, 0.0, 0.0, 0.0];
+        RobFrame {
+            ipoc: self.ipoc,
+            rist: Some(pose),
+            rsol: Some(KukaPose::from_array(self.commanded)),
+            aipos: Some(axes),
+            aspos: Some(axes),
+            delay: Some(self.late),
+        }
+        .emit(&self.cfg.send, self.cfg.precision, buf)
+    }
+
+    /// Offers an answer received before this cycle's deadline.
+    pub fn answer(&mut self, bytes: &[u8]) -> Verdict {
+        let sen = match SenFrame::parse(bytes) {
+            Ok(s) => s,
+            Err(e) => {
+                self.malformed += 1;
+                return Verdict::Malformed(e);
+            }
+        };
+        if sen.ipoc != self.ipoc {
+            self.wrong_ipoc += 1;
+            return Verdict::WrongIpoc;
+        }
+        if sen.sentype != self.cfg.sentype.as_bytes() {
+            self.wrong_type += 1;
+            return Verdict::WrongType;
+        }
+        if self.answered.is_some() {
+            return Verdict::Extra;
+        }
+        // No RKorr in the answer: the correction holds (HOLDON).
+        self.answered = Some(sen.rkorr.map(KukaPose::to_array).unwrap_or(self.correction));
+        Verdict::Accepted
+    }
+
+    /// Closes the cycle at its deadline: counts a missing answer as late,
+    /// applies the correction, moves the robot one cycle and advances IPOC.
+    /// Returns the path sample at the start of the next cycle.
+    pub fn end_cycle(&mut self, next_t: Instant) -> PathSample {
+        let on_time = self.answered.is_some();
+        match self.answered.take() {
+            Some(k) => match self.cfg.mode {
+                CorrMode::Absolute => self.correction = k,
+                CorrMode::Relative => {
+                    for i in 0..6 {
+                        self.correction[i] += k[i];
+                    }
+                }
+            },
+            None => {
+                self.late += 1;
+                if self.late >= self.cfg.late_limit {
+                    self.stopped = Some(StopReason::LateLimit);
+                }
+            }
+        }
+        self.apply_poscorr();
+        let robot_limited = self.follow();
+        self.cycles += 1;
+        self.ipoc += self.cfg.cycle_ms as u64;
+        PathSample {
+            t: next_t,
+            ipoc: self.ipoc,
+            commanded: self.commanded,
+            actual: self.actual,
+            on_time,
+            robot_limited,
+        }
+    }
+
+    fn apply_poscorr(&mut self) {
+        let c = &self.cfg;
+        let mut k = self.correction;
+        let mut clamped = false;
+        for (i, x) in k.iter_mut().enumerate() {
+            if !x.is_finite() {
+                *x = 0.0;
+                clamped = true;
+            }
+            if i < 3 {
+                let y = x.clamp(c.lower_mm[i], c.upper_mm[i]);
+                clamped |= y != *x;
+                *x = y;
+            }
+        }
+        let rot = (k[3] * k[3] + k[4] * k[4] + k[5] * k[5]).sqrt();
+        if rot > c.max_rot_deg {
+            for x in &mut k[3..] {
+                *x *= c.max_rot_deg / rot;
+            }
+            clamped = true;
+        }
+        if clamped {
+            self.poscorr_clamped += 1;
+        }
+        let trans = (k[0] * k[0] + k[1] * k[1] + k[2] * k[2]).sqrt();
+        let rot = (k[3] * k[3] + k[4] * k[4] + k[5] * k[5]).sqrt();
+        if trans > c.mon_max_trans_mm || rot > c.mon_max_rot_deg {
+            self.stopped = Some(StopReason::Monitor);
+        }
+        for i in 0..6 {
+            self.commanded[i] = c.start[i] + k[i];
+        }
+    }
+
+    /// One cycle of the robot towards the command; true where its limits acted.
+    fn follow(&mut self) -> bool {
+        let dt = self.cfg.cycle_ms as f64 * 1e-3;
+        let mut limited = false;
+        for i in 0..6 {
+            let vd = (self.commanded[i] - self.actual[i]) / dt;
+            let u = self.cfg.amax[i] * dt;
+            let v = vd.clamp(self.velocity[i] - u, self.velocity[i] + u).clamp(-self.cfg.vmax[i], self.cfg.vmax[i]);
+            limited |= (v - vd).abs() > 1e-9 * (1.0 + vd.abs());
+            self.velocity[i] = v;
+            self.actual[i] += v * dt;
+        }
+        if limited {
+            self.robot_limited += 1;
+        }
+        limited
+    }
+}

@@ -1,0 +1,254 @@
+//! The mock's UDP loop: sends `<Rob>` on an absolute schedule (sleep until
+//! ~300 µs early, then spin: DESIGN §10), collects the answer until the
+//! cycle's deadline, closes the cycle, logs the path. In process on a
+//! thread ([`spawn`]) or blocking ([`run`]).
+
+use std::io;
+use std::net::SocketAddr;
+use std::path::Path;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::thread::JoinHandle;
+
+use super::config::{ContextConfig, EthernetConfig, RsiFileError};
+use super::controller::{ControllerConfig, CorrMode, MockController, PathSample, StopReason, Verdict};
+use super::faults::{FaultInjector, Faults, Link, MAX_DATAGRAM, UdpLink};
+use topspin_core::calib::RobotFile;
+use topspin_daemon::clock::{self, SPIN_BEFORE_DEADLINE};
+use topspin_core::time::{Duration, Instant};
+
+/// How the mock runs.
+#[derive(Clone, Debug, PartialEq)]
+pub struct MockKrcConfig {
+    pub controller: ControllerConfig,
+    /// The sensor's address (Ethernet XML IP_NUMBER:PORT unless overridden).
+    pub sensor: SocketAddr,
+    /// The mock's own address.
+    pub bind: SocketAddr,
+    /// Stop after this many cycles (`None`: until stopped).
+    pub cycles: Option<u64>,
+    /// An answer must arrive within this time after the request. The real
+    /// controller's deadline is the cycle (the default, less 200 µs for the
+    /// mock's own scheduling). Tests on a loaded shared machine may stretch
+    /// it beyond the cycle: the next request then waits (the schedule slips
+    /// and catches up), and answers later than one cycle are still counted
+    /// in `MockResult::answers_after_cycle`.
+    pub answer_deadline: Duration,
+    pub faults: Faults,
+    pub seed: u64,
+}
+
+impl MockKrcConfig {
+    /// From the controller-side files and the robot cell: start at home,
+    /// the robot's limits a little above the PC's (`robot_margin`, e.g. 1.02).
+    pub fn from_files(
+        ethernet: &EthernetConfig,
+        context: &ContextConfig,
+        robot: &RobotFile,
+        mode: CorrMode,
+        robot_margin: f64,
+    ) -> Self {
+        let l = &robot.limits;
+        let cat = |a: [f64; 3], b: [f64; 3], s: f64| {
+            [a[0] * s, a[1] * s, a[2] * s, b[0], b[1], b[2]].map(|x| x * robot_margin)
+        };
+        let h = &robot.home;
+        let controller = ControllerConfig {
+            cycle_ms: robot.rsi.cycle_ms,
+            mode,
+            sentype: ethernet.sentype.clone(),
+            precision: context.precision,
+            send: ethernet.send.clone(),
+            late_limit: context.timeout as u64,
+            start: [h.xyz_m[0] * 1e3, h.xyz_m[1] * 1e3, h.xyz_m[2] * 1e3, h.abc_deg[0], h.abc_deg[1], h.abc_deg[2]],
+            vmax: cat(l.velocity_m_s, l.rot_velocity_deg_s, 1e3),
+            amax: cat(l.acceleration_m_s2, l.rot_acceleration_deg_s2, 1e3),
+            lower_mm: context.lower_mm,
+            upper_mm: context.upper_mm,
+            max_rot_deg: context.max_rot_deg,
+            mon_max_trans_mm: context.mon_max_trans_mm,
+            mon_max_rot_deg: context.mon_max_rot_deg,
+            first_ipoc: 4_208_831,
+        };
+        MockKrcConfig {
+            controller,
+            sensor: ethernet.sensor_addr(),
+            bind: "0.0.0.0:0".parse().expect("literal"),
+            cycles: None,
+            answer_deadline: Duration::from_millis(robot.rsi.cycle_ms as u64),
+            faults: Faults::default(),
+            seed: 1,
+        }
+    }
+
+    /// From the compiled-in `rsi/` files and calibration.
+    pub fn default_cell() -> Result<Self, RsiFileError> {
+        let e = EthernetConfig::parse(super::config::DEFAULT_ETHERNET_XML)?;
+        let c = ContextConfig::parse(super::config::DEFAULT_CONTEXT_XML)?;
+        let r = topspin_core::calib::Calibration::default_cell().robot;
+        Ok(Self::from_files(&e, &c, &r, CorrMode::Absolute, 1.02))
+    }
+}
+
+/// What a run did.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct MockResult {
+    pub cycles: u64,
+    /// Cycles without a valid answer by the deadline (= final `<Delay>`).
+    pub late: u64,
+    pub stopped_by_limit: bool,
+    pub stopped_by_monitor: bool,
+    pub wrong_ipoc: u64,
+    pub wrong_type: u64,
+    pub malformed: u64,
+    pub poscorr_clamped: u64,
+    pub robot_limited: u64,
+    pub dropped: u64,
+    pub delayed: u64,
+    pub duplicated: u64,
+    /// Requests sent after the next one (`Faults::reorder`).
+    pub reordered: u64,
+    /// Latest answer arrival after its request's scheduled time.
+    pub max_answer_delay: Duration,
+    /// Accepted answers that came later than one cycle (only possible with
+    /// a stretched `answer_deadline`).
+    pub answers_after_cycle: u64,
+    pub path: Vec<PathSample>,
+}
+
+impl MockResult {
+    /// Writes the path as CSV: time, IPOC, on time, robot limited, commanded
+    /// and actual pose.
+    pub fn write_csv(&self, path: &Path) -> io::Result<()> {
+        let mut w = csv::Writer::from_path(path)?;
+        w.write_record([
+            "t_s",
+            "ipoc",
+            "on_time",
+            "robot_limited",
+            "cmd_x_mm",
+            "cmd_y_mm",
+            "cmd_z_mm",
+            "cmd_a_deg",
+            "cmd_b_deg",
+            "cmd_c_deg",
+            "act_x_mm",
+            "act_y_mm",
+            "act_z_mm",
+            "act_a_deg",
+            "act_b_deg",
+            "act_c_deg",
+        ])?;
+        for s in &self.path {
+            let mut rec = vec![
+                format!("{:.6}", s.t.as_secs_f64()),
+                s.ipoc.to_string(),
+                (s.on_time as u8).to_string(),
+                (s.robot_limited as u8).to_string(),
+            ];
+            rec.extend(s.commanded.iter().map(|x| format!("{x:.4}")));
+            rec.extend(s.actual.iter().map(|x| format!("{x:.4}")));
+            w.write_record(&rec)?;
+        }
+        w.flush()
+    }
+}
+
+/// A mock running on its own thread.
+#[derive(Debug)]
+pub struct MockHandle {
+    pub stop: Arc<AtomicBool>,
+    pub local_addr: SocketAddr,
+    join: JoinHandle<io::Result<MockResult>>,
+}
+
+impl MockHandle {
+    /// Asks the mock to stop and waits for its result.
+    pub fn stop(self) -> io::Result<MockResult> {
+        self.stop.store(true, Ordering::Relaxed);
+        self.join()
+    }
+
+    /// Waits for the mock to finish by itself (cycle count, stop by limit).
+    pub fn join(self) -> io::Result<MockResult> {
+        self.join.join().unwrap_or_else(|_| Err(io::Error::other("mock thread panicked")))
+    }
+}
+
+/// Starts the mock on a thread.
+pub fn spawn(cfg: MockKrcConfig) -> io::Result<MockHandle> {
+    let link = UdpLink::new(cfg.bind, cfg.sensor)?;
+    let local_addr = link.local_addr()?;
+    let stop = Arc::new(AtomicBool::new(false));
+    let s = stop.clone();
+    let join = std::thread::Builder::new().name("mock-krc".into()).spawn(move || run_on(link, &cfg, &s))?;
+    Ok(MockHandle { stop, local_addr, join })
+}
+
+/// Runs the mock on this thread until `stop`, the cycle count or RSI stops.
+pub fn run(cfg: &MockKrcConfig, stop: &AtomicBool) -> io::Result<MockResult> {
+    run_on(UdpLink::new(cfg.bind, cfg.sensor)?, cfg, stop)
+}
+
+fn run_on(link: UdpLink, cfg: &MockKrcConfig, stop: &AtomicBool) -> io::Result<MockResult> {
+    if cfg.faults.any() {
+        let mut f = FaultInjector::new(link, cfg.faults, cfg.seed);
+        let mut r = cycle_loop(&mut f, cfg, stop)?;
+        r.dropped = f.dropped;
+        r.delayed = f.delayed;
+        r.duplicated = f.duplicated;
+        r.reordered = f.reordered;
+        Ok(r)
+    } else {
+        let mut l = link;
+        cycle_loop(&mut l, cfg, stop)
+    }
+}
+
+fn cycle_loop<L: Link>(link: &mut L, cfg: &MockKrcConfig, stop: &AtomicBool) -> io::Result<MockResult> {
+    let mut ctrl = MockController::new(cfg.controller.clone());
+    let cycle = Duration::from_millis(cfg.controller.cycle_ms as u64);
+    let deadline_after = if cfg.answer_deadline >= cycle {
+        if cfg.answer_deadline == cycle { Duration(cycle.0.saturating_sub(200_000)) } else { cfg.answer_deadline }
+    } else {
+        cfg.answer_deadline
+    };
+    let mut out = MockResult::default();
+    if let Some(n) = cfg.cycles {
+        out.path.reserve(n as usize);
+    }
+    let mut tx = [0u8; MAX_DATAGRAM];
+    let mut rx = [0u8; MAX_DATAGRAM];
+    let t0 = clock::now() + Duration::from_millis(2);
+    let mut k: u64 = 0;
+    while !stop.load(Ordering::Relaxed) && cfg.cycles.is_none_or(|n| k < n) && ctrl.stopped.is_none() {
+        let t_k = Instant(t0.0 + k * cycle.0);
+        clock::sleep_until(t_k, SPIN_BEFORE_DEADLINE);
+        let n = ctrl.request(&mut tx).map_err(|e| io::Error::other(e.to_string()))?;
+        link.send(&tx[..n])?;
+        let deadline = t_k + deadline_after;
+        while let Some(m) = link.recv_until(deadline, &mut rx)? {
+            if ctrl.answer(&rx[..m]) == Verdict::Accepted {
+                let d = clock::now() - t_k;
+                out.max_answer_delay = out.max_answer_delay.max(d);
+                if d > cycle {
+                    out.answers_after_cycle += 1;
+                }
+                break;
+            }
+        }
+        let sample = ctrl.end_cycle(t_k + cycle);
+        out.path.push(sample);
+        k += 1;
+    }
+    out.cycles = ctrl.cycles;
+    out.late = ctrl.late;
+    out.stopped_by_limit = ctrl.stopped == Some(StopReason::LateLimit);
+    out.stopped_by_monitor = ctrl.stopped == Some(StopReason::Monitor);
+    out.wrong_ipoc = ctrl.wrong_ipoc;
+    out.wrong_type = ctrl.wrong_type;
+    out.malformed = ctrl.malformed;
+    out.poscorr_clamped = ctrl.poscorr_clamped;
+    out.robot_limited = ctrl.robot_limited;
+    Ok(out)
+}

@@ -1,0 +1,57 @@
+//! The logo thread's sans-IO stream (`topspin_core::logo::stream`) fed
+//! with rendered crops of a simulated ball: one spin per ball, near the
+//! truth, repeated crops dropped.
+
+use topspin_core::calib::Calibration;
+use topspin_core::calib::camera::CameraCalib;
+use topspin_core::logo::LogoMethod;
+use topspin_core::logo::stream::{LogoStream, Method, SEQUENCE_LEN};
+use topspin_core::physics::Vec3;
+use topspin_core::time::{Duration, Instant};
+use topspin_core::wire::crop::Crop;
+use topspin_sim::render::{BallColour, Scene, SequenceOptions, render_sequence};
+use topspin_sim::{Setting, TrackerModel, simulate_ball};
+
+#[test]
+fn a_ball_passing_the_strip_gives_one_spin_near_the_truth() {
+    let cal = Calibration::default_cell();
+    let prop = cal.propagator();
+    let cam = CameraCalib::default_camera();
+    let scene = Scene::new(cam.clone(), BallColour::Orange);
+    let (truth, seq) = (0..30)
+        .find_map(|k| {
+            let b = simulate_ball(5, k, Setting::ALL[1], &prop, cal.strike.hit_plane_x, &TrackerModel::default())
+                .ok()?;
+            let seq = render_sequence(&scene, &b.truth, &prop, 5, k, &SequenceOptions { frames: SEQUENCE_LEN });
+            (seq.frames.len() == SEQUENCE_LEN).then_some((Vec3::from(b.truth.spin), seq))
+        })
+        .expect("a filmed ball");
+    let mut stream = LogoStream::new(cam, Method::Background(LogoMethod::Segment));
+    let mut spins = Vec::new();
+    let t0 = Instant::from_nanos(1_000_000_000);
+    let at = |t: f64| t0 + Duration::from_nanos((t * 1e9) as u64);
+    for f in &seq.frames {
+        let m = f.label.measured;
+        let c = Crop {
+            seq: f.label.frame as u32,
+            capture: at(f.label.t),
+            u: m.u as f32,
+            v: m.v as f32,
+            radius: m.radius as f32,
+            width: 60,
+            height: 60,
+            pixels: &f.crop.rgb,
+        };
+        spins.extend(stream.crop(&c));
+        // A repeated crop (same capture time) is dropped, not counted twice.
+        assert!(stream.crop(&c).is_none());
+    }
+    let last = at(seq.frames.last().unwrap().label.t);
+    assert!(stream.poll(last + Duration::from_millis(50)).is_none());
+    assert_eq!(spins.len(), 1, "{:?}", stream.counters());
+    let s = spins[0];
+    assert!((s.spin - truth).norm() < 0.15 * truth.norm(), "{:?} vs {truth:?}", s.spin);
+    assert!(s.cov.cholesky().is_some(), "covariance SPD");
+    let c = stream.counters();
+    assert_eq!((c.crops, c.dropped, c.sequences, c.fitted), (2 * SEQUENCE_LEN as u64, SEQUENCE_LEN as u64, 1, 1));
+}
