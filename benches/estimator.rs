@@ -10,9 +10,9 @@ use std::time::Instant as WallClock;
 use criterion::{Criterion, criterion_group, criterion_main};
 use topspin_core::calib::Calibration;
 use topspin_core::estimator::{Estimator, EstimatorConfig, EstimatorEvent};
-use topspin_lab::eval::stream::{StreamSetup, simulate_stream};
 use topspin_core::physics::Vec3;
 use topspin_core::time::Instant;
+use topspin_lab::eval::stream::{StreamSetup, simulate_stream};
 
 fn observations() -> Vec<(Instant, Vec3)> {
     let cal = Calibration::default_cell();

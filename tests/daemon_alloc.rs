@@ -8,8 +8,8 @@ use std::cell::Cell;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 
 use topspin_core::calib::Calibration;
-use topspin_sim::demo::{DemoConfig, run};
 use topspin_daemon::runtime::daemon::THREAD_START_HOOK;
+use topspin_sim::demo::{DemoConfig, run};
 
 struct Counting;
 

@@ -10,12 +10,12 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration as StdDuration;
 
 use topspin_core::calib::Calibration;
-use topspin_daemon::config::DaemonConfig;
-use topspin_daemon::rsi_server::{MAX_REQUEST_LEN, RsiServer, WaitStrategy, plan_slot};
 use topspin_core::rsi::session::{RsiSession, SessionConfig};
-use topspin_daemon::runtime::daemon::{Daemon, RuntimeConfig};
 use topspin_core::time::Instant;
 use topspin_core::wire::observation::{OBSERVATION_LEN, Observation};
+use topspin_daemon::config::DaemonConfig;
+use topspin_daemon::rsi_server::{MAX_REQUEST_LEN, RsiServer, WaitStrategy, plan_slot};
+use topspin_daemon::runtime::daemon::{Daemon, RuntimeConfig};
 
 fn observation(seq: u32) -> [u8; OBSERVATION_LEN] {
     let mut buf = [0u8; OBSERVATION_LEN];

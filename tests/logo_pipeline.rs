@@ -5,8 +5,8 @@
 use topspin_core::calib::Calibration;
 use topspin_core::calib::camera::CameraCalib;
 use topspin_lab::logo::eval::{EvalOptions, evaluate, spin_errors, summarise};
-use topspin_sim::render::BallColour;
 use topspin_sim::Setting;
+use topspin_sim::render::BallColour;
 
 #[test]
 fn rendered_balls_are_read_to_a_few_degrees() {

@@ -8,11 +8,11 @@
 
 use std::path::Path;
 
+use topspin_core::physics::{PhysicsParams, Propagator, Table};
 use topspin_lab::data::calibrate::{CalibrationSetup, calibrate, split_even_odd};
 use topspin_lab::data::eval::{CubicBaseline, EvalConfig, evaluate, prepare};
 use topspin_lab::data::frame::{BALL_RADIUS, BounceSearch, MPI_LAB_TO_TABLE, detect_bounces, estimate_frame};
 use topspin_lab::data::mpi::{RealTrajectory, SETS, load, locate, sampling_stats};
-use topspin_core::physics::{PhysicsParams, Propagator, Table};
 
 fn data() -> Option<Vec<RealTrajectory>> {
     let Some(dir) = locate(Path::new(env!("CARGO_MANIFEST_DIR"))) else {

@@ -8,14 +8,14 @@ use std::path::Path;
 use std::process::{Command, Output};
 
 use topspin_core::calib::Calibration;
-use topspin_daemon::config::DaemonConfig;
 use topspin_core::estimator::{Estimator, EstimatorConfig};
-use topspin_lab::eval::stream::{StreamSetup, simulate_stream};
 use topspin_core::ingest::Ingest;
 use topspin_core::plan::StrikePlan;
-use topspin_daemon::record::{Recorder, calib_files, read_session};
 use topspin_core::time::Instant;
 use topspin_core::wire::observation::{OBSERVATION_LEN, Observation};
+use topspin_daemon::config::DaemonConfig;
+use topspin_daemon::record::{Recorder, calib_files, read_session};
+use topspin_lab::eval::stream::{StreamSetup, simulate_stream};
 
 const TRACKER: &str = "127.0.0.7:5555";
 

@@ -9,10 +9,10 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use topspin_core::calib::Calibration;
-use topspin_sim::mock_krc::{self, Faults, MockKrcConfig, MockResult};
-use topspin_daemon::rsi_server::{RsiServer, WaitStrategy, plan_slot};
 use topspin_core::rsi::session::{MAX_ANSWER_LEN, RsiSession, SessionConfig, SessionStats};
 use topspin_core::time::{Duration, Instant};
+use topspin_daemon::rsi_server::{RsiServer, WaitStrategy, plan_slot};
+use topspin_sim::mock_krc::{self, Faults, MockKrcConfig, MockResult};
 
 fn run_with(faults: Faults, late_limit: u64, cycles: u64) -> MockResult {
     let cal = Calibration::default_cell();

@@ -27,14 +27,14 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use topspin_core::calib::Calibration;
-use topspin_sim::mock_krc::{self, MockKrcConfig};
 use topspin_core::motion::MotionLimits;
 use topspin_core::physics::Vec3;
 use topspin_core::plan::{EulerZyx, StrikePlan};
-use topspin_daemon::rsi_server::{RsiServer, WaitStrategy, plan_slot};
 use topspin_core::rsi::session::{RsiSession, SessionConfig};
-use topspin_daemon::clock;
 use topspin_core::time::{Duration, Instant};
+use topspin_daemon::clock;
+use topspin_daemon::rsi_server::{RsiServer, WaitStrategy, plan_slot};
+use topspin_sim::mock_krc::{self, MockKrcConfig};
 
 fn env_u64(name: &str, default: u64) -> u64 {
     std::env::var(name).ok().and_then(|s| s.parse().ok()).unwrap_or(default)

@@ -237,7 +237,8 @@ fn sigkill_mid_stroke_keeps_the_recording_and_a_restart_resumes() {
     assert_eq!(get(&summary2, "poscorr_clamped"), "0", "{summary2:?}");
     let files = recordings(&dir);
     assert_eq!(files.len(), 2, "the restart must not overwrite the killed recording: {files:?}");
-    let complete = files.iter().map(|f| topspin_daemon::record::read_session(f).unwrap()).find(|s| s.truncated.is_none());
+    let complete =
+        files.iter().map(|f| topspin_daemon::record::read_session(f).unwrap()).find(|s| s.truncated.is_none());
     assert!(complete.is_some(), "the restarted daemon's recording is complete");
     let _ = std::fs::remove_dir_all(&dir);
 }

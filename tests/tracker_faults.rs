@@ -11,9 +11,9 @@
 //! daemon's lateness; a missing answer still counts.
 
 use topspin_core::calib::Calibration;
+use topspin_core::time::Duration;
 use topspin_sim::demo::{DemoConfig, run};
 use topspin_sim::faults::TrackerFaults;
-use topspin_core::time::Duration;
 
 #[test]
 fn every_tracker_fault_at_once_is_survived_within_limits() {

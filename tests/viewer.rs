@@ -23,12 +23,12 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use foxglove::Decode;
 use foxglove::messages::{FrameTransform, PosesInFrame, SceneUpdate};
 use topspin_core::calib::Calibration;
-use topspin_sim::demo::{DemoConfig, run};
+use topspin_core::time::Duration;
 use topspin_daemon::record::replay::replay_session;
 use topspin_daemon::record::{TOPIC_COUNTERS, TOPIC_DATAGRAM, TOPIC_PLAN, TOPIC_RSI, read_session};
-use topspin_core::time::Duration;
 use topspin_daemon::viewer::replay::view_session;
 use topspin_daemon::viewer::{LiveServer, TOPICS, Topic, ViewerSink};
+use topspin_sim::demo::{DemoConfig, run};
 use topspin_sim::probe;
 
 /// 2020-01-01 in Unix ns: log times are wall clock, not the monotonic clock.

@@ -11,8 +11,8 @@ use serde_json::json;
 
 use super::BadInput;
 use topspin_core::calib::Calibration;
-use topspin_sim::demo::{DemoConfig, Latencies, run_loopback};
 use topspin_daemon::rsi_server::WaitStrategy;
+use topspin_sim::demo::{DemoConfig, Latencies, run_loopback};
 use topspin_sim::probe;
 
 #[derive(Debug, Subcommand)]

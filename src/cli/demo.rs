@@ -5,8 +5,8 @@ use clap::Args;
 
 use super::BadInput;
 use topspin_core::calib::Calibration;
-use topspin_sim::demo::{DemoConfig, DemoReport, HIT_RADIUS, HIT_WINDOW, run as run_demo};
 use topspin_sim::TrackerModel;
+use topspin_sim::demo::{DemoConfig, DemoReport, HIT_RADIUS, HIT_WINDOW, run as run_demo};
 
 #[derive(Debug, Args)]
 pub struct DemoArgs {
@@ -79,11 +79,15 @@ pub fn run(a: DemoArgs) -> anyhow::Result<()> {
             bind: "127.0.0.1:0".parse().expect("literal"),
             source: Some([127, 0, 0, 1].into()),
             method: match method {
-                topspin_daemon::config::LogoMethodConfig::Cnn => topspin_daemon::runtime::daemon::LogoMethodChoice::Cnn {
-                    model: a.cnn.model_path(),
-                    backend: a.cnn.backend.clone(),
-                },
-                topspin_daemon::config::LogoMethodConfig::Background => topspin_daemon::runtime::daemon::LogoMethodChoice::Background,
+                topspin_daemon::config::LogoMethodConfig::Cnn => {
+                    topspin_daemon::runtime::daemon::LogoMethodChoice::Cnn {
+                        model: a.cnn.model_path(),
+                        backend: a.cnn.backend.clone(),
+                    }
+                }
+                topspin_daemon::config::LogoMethodConfig::Background => {
+                    topspin_daemon::runtime::daemon::LogoMethodChoice::Background
+                }
             },
             camera: topspin_core::calib::camera::CameraCalib::default_camera(),
             camera_latency: topspin_core::time::Duration(0),

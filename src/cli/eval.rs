@@ -9,11 +9,11 @@ use clap::{Args, Subcommand};
 
 use super::BadInput;
 use super::fit::{PhysicsChoice, load_calibration};
-use topspin_lab::eval::fit::{MethodRow, Window, accuracy, outlier_experiment};
-use topspin_sim::simulate_set;
 use topspin_core::stats::Summary;
+use topspin_lab::eval::fit::{MethodRow, Window, accuracy, outlier_experiment};
 use topspin_lab::eval::stream::{StreamSetup, evaluate};
 use topspin_sim::TrackerModel;
+use topspin_sim::simulate_set;
 
 #[derive(Debug, Subcommand)]
 pub enum EvalCommand {

@@ -18,11 +18,11 @@ use topspin_core::calib::camera::CameraCalib;
 use topspin_lab::data::eval::prepare;
 use topspin_lab::data::frame::MPI_LAB_TO_TABLE;
 use topspin_lab::data::mpi::{load, locate};
-use topspin_sim::demo::{DemoConfig, run_loopback};
 use topspin_lab::eval::paper::plug::{CnnPredictor, FusedLogo, TrajectoryLogoFusion};
 use topspin_lab::eval::paper::report::{Histogram, LatencyRun, PaperReport, markdown};
 use topspin_lab::eval::paper::{Extensions, PaperConfig, Progress, figures, run_tables};
 use topspin_lab::progress::{StageBar, worker_threads};
+use topspin_sim::demo::{DemoConfig, run_loopback};
 
 #[derive(Debug, Args)]
 pub struct EvalPaperArgs {

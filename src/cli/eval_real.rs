@@ -11,6 +11,7 @@ use serde_json::json;
 
 use super::BadInput;
 use super::fit::{PhysicsChoice, load_calibration};
+use topspin_core::physics::PhysicsParams;
 use topspin_lab::data::eval::prepare;
 use topspin_lab::data::frame::MPI_LAB_TO_TABLE;
 use topspin_lab::data::mpi::{DATA_ENV, load, locate};
@@ -19,7 +20,6 @@ use topspin_lab::data::study::{
     LiftChoice, PREDICTORS, Variant, Which, calibrate_lift, calibration_markdown, compare, markdown, params_json,
     rows_json, spin_markdown, spin_summary,
 };
-use topspin_core::physics::PhysicsParams;
 
 #[derive(Debug, Args)]
 pub struct EvalRealArgs {

@@ -19,12 +19,12 @@ use super::{BadInput, logo_cnn};
 use topspin_core::calib::Calibration;
 use topspin_core::calib::camera::CameraCalib;
 use topspin_core::logo::ball::Circle;
-use topspin_lab::logo::eval::{self, BallEval, EvalOptions, Row};
 use topspin_core::logo::pipeline::{CropInput, LogoMethod, process_sequence};
 use topspin_core::logo::{CropImage, DetectorConfig, GapRule, RotationFitConfig};
 use topspin_core::physics::rad_to_rps;
-use topspin_sim::render::{BallColour, crop_origin};
+use topspin_lab::logo::eval::{self, BallEval, EvalOptions, Row};
 use topspin_sim::Setting;
+use topspin_sim::render::{BallColour, crop_origin};
 
 #[derive(Debug, clap::Args)]
 pub struct LogoArgs {

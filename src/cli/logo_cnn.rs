@@ -17,13 +17,13 @@ use super::BadInput;
 use super::logo::{FolderFrame, read_png};
 use topspin_core::calib::Calibration;
 use topspin_core::calib::camera::CameraCalib;
-use topspin_core::stats::Summary;
 use topspin_core::logo::cnn::{self, CnnOutput, LogoCnn, geodesic_deg, swing_to};
-use topspin_lab::logo::compare::{self, CompareBall, CompareOptions, CompareRow, SOURCES};
 use topspin_core::logo::rotation::RotationFitConfig;
 use topspin_core::physics::{Vec3, rad_to_rps};
-use topspin_sim::render::BallColour;
+use topspin_core::stats::Summary;
+use topspin_lab::logo::compare::{self, CompareBall, CompareOptions, CompareRow, SOURCES};
 use topspin_sim::Setting;
+use topspin_sim::render::BallColour;
 
 fn bad(msg: impl Into<String>) -> anyhow::Error {
     BadInput(msg.into()).into()

@@ -9,9 +9,9 @@ use clap::Args;
 
 use super::BadInput;
 use topspin_core::calib::Calibration;
+use topspin_core::time::Duration;
 use topspin_sim::mock_krc::config::{ContextConfig, DEFAULT_CONTEXT_XML, DEFAULT_ETHERNET_XML, EthernetConfig};
 use topspin_sim::mock_krc::{CorrMode, Faults, MockKrcConfig};
-use topspin_core::time::Duration;
 
 #[derive(Debug, Args)]
 pub struct MockKrcArgs {

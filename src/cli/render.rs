@@ -31,12 +31,12 @@ use super::logo::parse_colours;
 use topspin_core::calib::Calibration;
 use topspin_core::calib::camera::CameraCalib;
 use topspin_core::logo::BallView;
-use topspin_lab::logo::eval::MIN_FRAMES;
 use topspin_core::physics::{Vec3, rad_to_rps};
-use topspin_sim::render::{Conditions, Frame, Scene, Sequence, SequenceOptions, render_sequence};
-use topspin_sim::{Setting, TrackerModel, simulate_ball};
 use topspin_core::time::Instant;
 use topspin_core::wire::crop::{CROP_MAX_LEN, Crop};
+use topspin_lab::logo::eval::MIN_FRAMES;
+use topspin_sim::render::{Conditions, Frame, Scene, Sequence, SequenceOptions, render_sequence};
+use topspin_sim::{Setting, TrackerModel, simulate_ball};
 
 /// Where the live stream's capture clock starts before the first ball, s.
 pub const STREAM_LEAD: f64 = 0.2;
@@ -271,7 +271,9 @@ fn stream(to: &str, bind: &str, sequences: &[Sequence]) -> anyhow::Result<()> {
     for (j, s) in sequences.iter().enumerate() {
         for f in &s.frames {
             let capture = STREAM_LEAD + j as f64 * STREAM_GAP + f.label.t;
-            if let Some(wait) = Duration::from_secs_f64(capture).checked_sub(std::time::Duration::from_secs_f64(topspin_daemon::clock::secs_since(epoch))) {
+            if let Some(wait) = Duration::from_secs_f64(capture)
+                .checked_sub(std::time::Duration::from_secs_f64(topspin_daemon::clock::secs_since(epoch)))
+            {
                 std::thread::sleep(wait);
             }
             let crop = Crop {

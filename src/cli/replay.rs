@@ -32,7 +32,11 @@ pub struct ReplayArgs {
 }
 
 /// Serves the session in the live view (after the comparison).
-fn live(args: &ReplayArgs, session: &topspin_daemon::record::Session, addr: std::net::SocketAddr) -> anyhow::Result<()> {
+fn live(
+    args: &ReplayArgs,
+    session: &topspin_daemon::record::Session,
+    addr: std::net::SocketAddr,
+) -> anyhow::Result<()> {
     let server = LiveServer::start(addr, None).map_err(|e| BadInput(e.to_string()))?;
     eprintln!("live view on ws://{} (Foxglove: Open connection → Foxglove WebSocket)", server.addr());
     let start = topspin_daemon::clock::now();

@@ -15,6 +15,7 @@ use clap::Args;
 use super::BadInput;
 use topspin_core::calib::Calibration;
 use topspin_core::calib::camera::CameraCalib;
+use topspin_core::time::Duration;
 use topspin_daemon::config::{DaemonConfig, LogoMethodConfig, RsiWait};
 use topspin_daemon::record::sink::RecordingSink;
 use topspin_daemon::record::{Recorder, calib_files};
@@ -22,7 +23,6 @@ use topspin_daemon::rsi_server::WaitStrategy;
 use topspin_daemon::runtime::daemon::{Daemon, LogoMethodChoice, LogoRuntime, RuntimeConfig, ThreadSpec};
 use topspin_daemon::runtime::telemetry::TelemetrySink;
 use topspin_daemon::systemd::Notifier;
-use topspin_core::time::Duration;
 use topspin_daemon::viewer::{LiveServer, ViewerSink};
 
 #[derive(Debug, Args)]
@@ -42,7 +42,8 @@ pub struct RunArgs {
 /// thread, the camera's calibration).
 pub fn runtime_config(c: &DaemonConfig) -> Result<RuntimeConfig, BadInput> {
     let t = &c.threads;
-    let spec = |core: topspin_daemon::config::Core, priority: u8| ThreadSpec { core: core.0, priority: Some(priority as i32) };
+    let spec =
+        |core: topspin_daemon::config::Core, priority: u8| ThreadSpec { core: core.0, priority: Some(priority as i32) };
     Ok(RuntimeConfig {
         tracker_bind: c.network.tracker_bind,
         tracker_source: Some(c.network.tracker_source),

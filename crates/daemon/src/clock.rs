@@ -25,7 +25,7 @@ pub fn now() -> Instant {
 /// is wall-clock time, for the log times of the recording and the live view
 /// (Foxglove's timeline), while everything else stays on the monotonic clock.
 #[allow(clippy::disallowed_methods)] // the one wall-clock read
-pub fn unix_offset_ns() -> u64 {
+pub(crate) fn unix_offset_ns() -> u64 {
     static OFFSET: OnceLock<u64> = OnceLock::new();
     *OFFSET.get_or_init(|| {
         let mono = now().as_nanos();

@@ -18,11 +18,11 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
 /// Where the system-wide configuration lives.
-pub const SYSTEM_CONFIG_PATH: &str = "/etc/topspin/topspin.toml";
+pub(crate) const SYSTEM_CONFIG_PATH: &str = "/etc/topspin/topspin.toml";
 /// Prefix of the environment variables that override keys.
-pub const ENV_PREFIX: &str = "TOPSPIN";
+pub(crate) const ENV_PREFIX: &str = "TOPSPIN";
 /// The largest CPU index a thread may be pinned to (glibc's `CPU_SETSIZE`).
-pub const MAX_CORE: usize = 1023;
+pub(crate) const MAX_CORE: usize = 1023;
 
 /// A configuration that cannot be used. Display is one line naming the file,
 /// variable or key.
@@ -320,7 +320,7 @@ impl Default for DaemonConfig {
 }
 
 /// Log levels `telemetry.log_level` accepts.
-pub const LOG_LEVELS: [&str; 5] = ["error", "warn", "info", "debug", "trace"];
+pub(crate) const LOG_LEVELS: [&str; 5] = ["error", "warn", "info", "debug", "trace"];
 
 impl DaemonConfig {
     /// The effective configuration: defaults < [`SYSTEM_CONFIG_PATH`] (if
@@ -465,7 +465,11 @@ impl DaemonConfig {
 
     /// `logo.model`, or the default model when empty.
     pub fn logo_model(&self) -> PathBuf {
-        if self.logo.model.as_os_str().is_empty() { topspin_core::logo::cnn::default_model() } else { self.logo.model.clone() }
+        if self.logo.model.as_os_str().is_empty() {
+            topspin_core::logo::cnn::default_model()
+        } else {
+            self.logo.model.clone()
+        }
     }
 
     /// `tracker.noise_mm` in metres (for `EstimatorConfig::with_noise`).

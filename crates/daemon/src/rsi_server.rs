@@ -11,15 +11,15 @@ use std::io;
 use std::net::{SocketAddr, UdpSocket};
 use std::sync::atomic::{AtomicBool, Ordering};
 
-use topspin_core::rsi::session::{MAX_ANSWER_LEN, RsiSession, SessionEvent};
-use topspin_core::plan::StrikePlan;
 use crate::clock;
+use topspin_core::plan::StrikePlan;
+use topspin_core::rsi::session::{MAX_ANSWER_LEN, RsiSession, SessionEvent};
 use topspin_core::time::Instant;
 
 /// Largest request read, bytes.
 pub const MAX_REQUEST_LEN: usize = 2048;
 /// Blocking receive timeout, only to look at the stop flag.
-pub const STOP_POLL: std::time::Duration = std::time::Duration::from_millis(20);
+pub(crate) const STOP_POLL: std::time::Duration = std::time::Duration::from_millis(20);
 
 /// How the loop waits for the next datagram.
 #[derive(Copy, Clone, Debug, PartialEq, Eq, clap::ValueEnum)]

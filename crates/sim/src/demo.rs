@@ -20,27 +20,27 @@ use std::sync::atomic::AtomicBool;
 
 use serde::Serialize;
 
-use topspin_core::calib::Calibration;
-use topspin_core::calib::camera::CameraCalib;
-use topspin_core::stats::Summary;
-use topspin_core::ingest::IngestCounters;
-use topspin_core::logo::stream::LogoCounters;
-use crate::mock_krc::{self, MockKrcConfig};
-use topspin_core::physics::{Vec3, rad_to_rps};
-use topspin_core::plan::StrikePlan;
-use crate::render::{BallColour, Scene, Sequence, SequenceOptions, render_sequence};
-use topspin_daemon::runtime::daemon::{Daemon, DaemonSummary, LinkState, RuntimeConfig};
-pub use topspin_daemon::runtime::telemetry::{Latencies, Latency};
-use topspin_daemon::clock;
 use crate::faults::{InjectedCounts, TrackerFaults, inject, plan_datagrams, send_planned};
+use crate::mock_krc::{self, MockKrcConfig};
+use crate::render::{BallColour, Scene, Sequence, SequenceOptions, render_sequence};
 use crate::stream::{capture_time, stream};
 use crate::{SimBall, TrackerModel, schedule, true_state_at};
+use topspin_core::calib::Calibration;
+use topspin_core::calib::camera::CameraCalib;
+use topspin_core::ingest::IngestCounters;
+use topspin_core::logo::stream::LogoCounters;
+use topspin_core::physics::{Vec3, rad_to_rps};
+use topspin_core::plan::StrikePlan;
+use topspin_core::stats::Summary;
 use topspin_core::time::{Duration, Instant};
 use topspin_core::wire::crop::{CROP_MAX_LEN, Crop};
+use topspin_daemon::clock;
+use topspin_daemon::runtime::daemon::{Daemon, DaemonSummary, LinkState, RuntimeConfig};
+pub use topspin_daemon::runtime::telemetry::{Latencies, Latency};
 
 pub use topspin_core::plan::{HIT_RADIUS, HIT_WINDOW};
 /// Time from the daemon's start to the first launch, s.
-pub const LEAD_IN: f64 = 0.5;
+pub(crate) const LEAD_IN: f64 = 0.5;
 
 /// How the demo runs.
 #[derive(Clone, Debug, PartialEq)]
@@ -72,7 +72,7 @@ pub struct DemoConfig {
 }
 
 /// After a live client connects, time given it to subscribe.
-pub const LIVE_SETTLE: Duration = Duration::from_millis(500);
+pub(crate) const LIVE_SETTLE: Duration = Duration::from_millis(500);
 
 impl Default for DemoConfig {
     fn default() -> Self {
@@ -311,7 +311,8 @@ fn viewer_sink(
     rcfg.record_rsi = true;
     let live = match cfg.live {
         Some(addr) => {
-            let server = topspin_daemon::viewer::LiveServer::start(addr, rcfg.telemetry.core).map_err(std::io::Error::other)?;
+            let server =
+                topspin_daemon::viewer::LiveServer::start(addr, rcfg.telemetry.core).map_err(std::io::Error::other)?;
             tracing::info!(target: "topspin::viewer", "live view on ws://{}", server.addr());
             if cfg.live_wait.0 > 0 {
                 let until = clock::now() + cfg.live_wait;

@@ -15,16 +15,16 @@ use rand_chacha::ChaCha8Rng;
 
 use super::SimBall;
 use super::stream::{StreamStats, capture_time};
-use topspin_daemon::clock;
 use topspin_core::time::{Duration, Instant};
 use topspin_core::wire::observation::{OBSERVATION_LEN, Observation, ObservationPacket};
+use topspin_daemon::clock;
 
 /// Longest datagram the injector writes (garbage included).
-pub const MAX_PLANNED_LEN: usize = 64;
+pub(crate) const MAX_PLANNED_LEN: usize = 64;
 
 /// Which socket a datagram leaves from.
 #[derive(Copy, Clone, Debug, PartialEq, Eq)]
-pub enum Sender {
+pub(crate) enum Sender {
     /// The configured tracker's address.
     Tracker,
     /// Another address (a second tracker, a stray device).
@@ -33,7 +33,7 @@ pub enum Sender {
 
 /// One datagram and when to send it.
 #[derive(Copy, Clone, Debug, PartialEq, Eq)]
-pub struct Planned {
+pub(crate) struct Planned {
     pub at: Instant,
     pub from: Sender,
     pub len: usize,
@@ -136,7 +136,7 @@ fn observation(seq: u32, capture: Instant, pos: [f32; 3]) -> Planned {
 
 /// The clean stream: every observation of `balls` (ball k launched
 /// `starts[k]` s after `t0`) sent at capture + `latency`, in order.
-pub fn plan_datagrams(balls: &[SimBall], starts: &[f64], latency: f64, t0: Instant) -> Vec<Planned> {
+pub(crate) fn plan_datagrams(balls: &[SimBall], starts: &[f64], latency: f64, t0: Instant) -> Vec<Planned> {
     let latency = Duration::from_nanos((latency.max(0.0) * 1e9) as u64);
     let mut seq: u32 = 0;
     let mut out = Vec::with_capacity(balls.iter().map(|b| b.observations.len()).sum());
@@ -158,7 +158,7 @@ fn secs(d: f64) -> Duration {
 
 /// Applies `faults` to a clean plan (seeded); the result is sorted by send
 /// time.
-pub fn inject(clean: &[Planned], faults: &TrackerFaults, seed: u64) -> (Vec<Planned>, InjectedCounts) {
+pub(crate) fn inject(clean: &[Planned], faults: &TrackerFaults, seed: u64) -> (Vec<Planned>, InjectedCounts) {
     let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x7472_6163_6b65_7246);
     let mut n = InjectedCounts { clean: clean.len() as u64, ..Default::default() };
     let (Some(first), Some(last)) = (clean.first(), clean.last()) else {
@@ -250,7 +250,7 @@ pub fn inject(clean: &[Planned], faults: &TrackerFaults, seed: u64) -> (Vec<Plan
 /// Sends `plan` in order, each datagram at its time: `Sender::Tracker`
 /// ones over `tracker`, `Sender::Foreign` ones over `foreign` (skipped
 /// without one). Both sockets are connected to the daemon.
-pub fn send_planned(
+pub(crate) fn send_planned(
     tracker: &UdpSocket,
     foreign: Option<&UdpSocket>,
     plan: &[Planned],
@@ -284,8 +284,8 @@ pub fn send_planned(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use topspin_core::calib::Calibration;
     use crate::{TrackerModel, schedule};
+    use topspin_core::calib::Calibration;
 
     fn clean() -> Vec<Planned> {
         let cal = Calibration::default_cell();

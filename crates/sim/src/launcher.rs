@@ -80,21 +80,21 @@ pub struct Distribution {
 }
 
 /// Launch point x range (behind the opponent's end, m).
-pub const LAUNCH_X: Range = Range::new(-1.60, -1.45);
+pub(crate) const LAUNCH_X: Range = Range::new(-1.60, -1.45);
 /// Launch point |y| ≤ this, m.
-pub const LAUNCH_Y_MAX: f64 = 0.30;
+pub(crate) const LAUNCH_Y_MAX: f64 = 0.30;
 /// Launch point height of the ball centre above the table surface, m.
-pub const LAUNCH_Z: Range = Range::new(0.15, 0.40);
+pub(crate) const LAUNCH_Z: Range = Range::new(0.15, 0.40);
 /// Target bounce x on the robot's half, m.
-pub const TARGET_X: Range = Range::new(0.25, 1.15);
+pub(crate) const TARGET_X: Range = Range::new(0.25, 1.15);
 /// Target bounce |y| ≤ this, m: a launcher aimed at the robot's half,
 /// whose balls then cross the hitting plane within about ±0.6 m (sidespin
 /// carries them further out), inside the robot's reach.
-pub const TARGET_Y_MAX: f64 = 0.40;
+pub(crate) const TARGET_Y_MAX: f64 = 0.40;
 /// Sidespin axis tilt from the "up" axis towards backspin, degrees.
-pub const SIDESPIN_TILT_DEG: Range = Range::new(5.0, 20.0);
+pub(crate) const SIDESPIN_TILT_DEG: Range = Range::new(5.0, 20.0);
 /// Draws tried per launch before giving up.
-pub const MAX_ATTEMPTS: usize = 64;
+pub(crate) const MAX_ATTEMPTS: usize = 64;
 /// Elevation search interval, rad.
 const ELEVATION: (f64, f64) = (-0.6, 0.75);
 /// Accepted miss of the target bounce point, m.
@@ -129,7 +129,7 @@ impl Setting {
     /// backspin the Magnus lift exceeds gravity and a fast ball would not
     /// come down on the table (the paper's medium and high backspin were
     /// hard to tell apart too).
-    pub fn distribution(&self) -> Distribution {
+    pub(crate) fn distribution(&self) -> Distribution {
         use Power::*;
         use SpinType::*;
         let (speed, spin_rps) = match (self.spin, self.power) {
@@ -348,9 +348,9 @@ pub fn launch(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use topspin_core::calib::Calibration;
     use rand::SeedableRng;
     use rand_chacha::ChaCha8Rng;
+    use topspin_core::calib::Calibration;
 
     #[test]
     fn names_round_trip() {

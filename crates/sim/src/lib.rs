@@ -49,11 +49,11 @@ pub fn simulate_set(cal: &Calibration, seed: u64, n: usize, tracker: &TrackerMod
 }
 
 /// Shortest quiet time between one flight's end and the next launch, s.
-pub const MIN_PAUSE: f64 = 0.1;
+pub(crate) const MIN_PAUSE: f64 = 0.1;
 
 /// The launcher's and the tracker's random streams for ball `k` of a run
 /// seeded with `seed` (ChaCha streams 2k and 2k + 1).
-pub fn ball_rngs(seed: u64, k: usize) -> (ChaCha8Rng, ChaCha8Rng) {
+pub(crate) fn ball_rngs(seed: u64, k: usize) -> (ChaCha8Rng, ChaCha8Rng) {
     let mut launcher = ChaCha8Rng::seed_from_u64(seed);
     launcher.set_stream(2 * k as u64);
     let mut tracker = ChaCha8Rng::seed_from_u64(seed);

@@ -23,9 +23,9 @@ use tungstenite::client::IntoClientRequest;
 
 /// The WebSocket subprotocols offered, the SDK's name first: the
 /// `foxglove.websocket.v1` protocol, as the SDK names it, and its old name.
-pub const SUBPROTOCOLS: [&str; 2] = ["foxglove.sdk.v1", "foxglove.websocket.v1"];
+pub(crate) const SUBPROTOCOLS: [&str; 2] = ["foxglove.sdk.v1", "foxglove.websocket.v1"];
 /// Binary frame opcode of a message on a subscription.
-pub const OP_MESSAGE_DATA: u8 = 0x01;
+pub(crate) const OP_MESSAGE_DATA: u8 = 0x01;
 
 /// What one channel delivered.
 #[derive(Clone, Debug, Default)]
@@ -82,7 +82,10 @@ fn connect(addr: SocketAddr, stop: &AtomicBool, patience: std::time::Duration) -
     loop {
         match TcpStream::connect(addr) {
             Ok(s) => return Ok(s),
-            Err(e) if topspin_daemon::clock::secs_since(start) > patience.as_secs_f64() || stop.load(Ordering::Relaxed) => {
+            Err(e)
+                if topspin_daemon::clock::secs_since(start) > patience.as_secs_f64()
+                    || stop.load(Ordering::Relaxed) =>
+            {
                 return Err(ProbeError::Connect { addr, message: e.to_string() });
             }
             Err(_) => std::thread::sleep(std::time::Duration::from_millis(20)),

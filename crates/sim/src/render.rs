@@ -27,30 +27,30 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 
+use crate::truth::Flight;
+use crate::{Setting, Truth};
 use topspin_core::calib::camera::CameraCalib;
 use topspin_core::logo::ball::{self, Circle};
-pub use topspin_core::wire::crop::crop_origin;
 use topspin_core::logo::detect::CropImage;
 use topspin_core::logo::pipeline::CropInput;
 use topspin_core::logo::view::BallView;
 use topspin_core::physics::{Propagator, Vec3};
-use crate::truth::Flight;
-use crate::{Setting, Truth};
+pub use topspin_core::wire::crop::crop_origin;
 
 /// Side of a crop, px (the paper's crops are 60 × 60).
-pub const CROP_SIZE: u32 = 60;
+pub(crate) const CROP_SIZE: u32 = 60;
 
 /// Samples per pixel over the exposure.
-pub const SUBFRAMES: usize = 16;
+pub(crate) const SUBFRAMES: usize = 16;
 
 /// Frames rendered per ball by default (the paper fits 10 to 30).
-pub const DEFAULT_FRAMES: usize = 20;
+pub(crate) const DEFAULT_FRAMES: usize = 20;
 
 /// Frames closer than this to the bounce are not used, s.
-pub const BOUNCE_MARGIN: f64 = 0.002;
+pub(crate) const BOUNCE_MARGIN: f64 = 0.002;
 
 /// Width of the logo's soft printed edge, rad on the ball.
-pub const LOGO_EDGE: f64 = 0.03;
+pub(crate) const LOGO_EDGE: f64 = 0.03;
 
 /// The ball's colour.
 #[derive(Copy, Clone, Debug, PartialEq, Eq, Hash)]
@@ -502,8 +502,8 @@ fn value_noise(x: f64, y: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use topspin_core::calib::Calibration;
     use crate::{TrackerModel, simulate_ball};
+    use topspin_core::calib::Calibration;
 
     #[test]
     fn a_sequence_is_deterministic_and_labelled() {

@@ -8,9 +8,9 @@ use std::net::UdpSocket;
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use super::SimBall;
-use topspin_daemon::clock;
 use topspin_core::time::{Duration, Instant};
 use topspin_core::wire::observation::{OBSERVATION_LEN, Observation};
+use topspin_daemon::clock;
 
 /// What a stream sent.
 #[derive(Copy, Clone, Debug, Default, PartialEq, Eq)]
@@ -23,7 +23,7 @@ pub struct StreamStats {
 
 /// The capture time of observation `t` (s after its ball's launch) of a
 /// ball launched `start` s after `t0`.
-pub fn capture_time(t0: Instant, start: f64, t: f64) -> Instant {
+pub(crate) fn capture_time(t0: Instant, start: f64, t: f64) -> Instant {
     t0 + Duration::from_nanos(((start + t) * 1e9).round() as u64)
 }
 

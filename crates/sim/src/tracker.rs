@@ -44,7 +44,7 @@ impl Default for TrackerModel {
 }
 
 /// Distance of a false detection from the ball, m.
-pub const FALSE_START_DISTANCE: (f64, f64) = (0.03, 0.20);
+pub(crate) const FALSE_START_DISTANCE: (f64, f64) = (0.03, 0.20);
 
 /// One simulated observation.
 #[derive(Copy, Clone, Debug, PartialEq)]
@@ -118,11 +118,11 @@ pub fn observe(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use topspin_core::calib::Calibration;
     use crate::launcher::{Setting, launch};
     use crate::truth::true_position_at;
     use rand::SeedableRng;
     use rand_chacha::ChaCha8Rng;
+    use topspin_core::calib::Calibration;
 
     fn truth(k: usize) -> (Truth, Propagator) {
         let cal = Calibration::default_cell();

@@ -9,7 +9,7 @@ use super::launcher::{Launch, Setting};
 use topspin_core::physics::{BallState, Event, Propagator, StopAt, Vec3};
 
 /// Longest flight followed, s.
-pub const FLIGHT_T_MAX: f64 = 3.0;
+pub(crate) const FLIGHT_T_MAX: f64 = 3.0;
 
 /// A ball state in plain arrays (SI, table frame).
 #[derive(Copy, Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -199,10 +199,10 @@ pub fn true_position_at(launch: &Launch, prop: &Propagator, t: f64) -> Vec3 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use topspin_core::calib::Calibration;
     use crate::launcher::launch;
     use rand::SeedableRng;
     use rand_chacha::ChaCha8Rng;
+    use topspin_core::calib::Calibration;
 
     #[test]
     fn truth_is_consistent_with_the_flight() {

@@ -20,8 +20,8 @@ fn a_ball_passing_the_strip_gives_one_spin_near_the_truth() {
     let scene = Scene::new(cam.clone(), BallColour::Orange);
     let (truth, seq) = (0..30)
         .find_map(|k| {
-            let b = simulate_ball(5, k, Setting::ALL[1], &prop, cal.strike.hit_plane_x, &TrackerModel::default())
-                .ok()?;
+            let b =
+                simulate_ball(5, k, Setting::ALL[1], &prop, cal.strike.hit_plane_x, &TrackerModel::default()).ok()?;
             let seq = render_sequence(&scene, &b.truth, &prop, 5, k, &SequenceOptions { frames: SEQUENCE_LEN });
             (seq.frames.len() == SEQUENCE_LEN).then_some((Vec3::from(b.truth.spin), seq))
         })

@@ -16,7 +16,7 @@ use crate::calib::CalibError;
 use crate::physics::Vec3;
 
 /// The compiled-in default (the repository's `calib/camera.toml`).
-pub const DEFAULT_CAMERA: &str = include_str!("../../../../calib/camera.toml");
+pub(crate) const DEFAULT_CAMERA: &str = include_str!("../../../../calib/camera.toml");
 
 /// `[camera]` of `calib/camera.toml`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -57,7 +57,7 @@ pub struct LogoSection {
 /// `calib/camera.toml`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct CameraFile {
+pub(crate) struct CameraFile {
     pub version: u32,
     pub camera: CameraSection,
     pub logo: LogoSection,
@@ -155,7 +155,7 @@ impl CameraCalib {
     }
 
     /// Principal point (cx, cy), px.
-    pub fn principal_point(&self) -> (f64, f64) {
+    pub(crate) fn principal_point(&self) -> (f64, f64) {
         (self.camera.principal_point[0], self.camera.principal_point[1])
     }
 
@@ -176,7 +176,7 @@ impl CameraCalib {
 
     /// The pixel (u, v) a camera-frame point projects to, or `None` behind
     /// the camera.
-    pub fn project(&self, p_camera: &Vec3) -> Option<(f64, f64)> {
+    pub(crate) fn project(&self, p_camera: &Vec3) -> Option<(f64, f64)> {
         if p_camera.z <= 1e-9 {
             return None;
         }

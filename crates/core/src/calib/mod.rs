@@ -22,7 +22,7 @@ const DEFAULT_ROBOT: &str = include_str!("../../../../calib/robot.toml");
 /// `calib/physics.toml`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct PhysicsFile {
+pub(crate) struct PhysicsFile {
     /// Format version of the file.
     pub version: u32,
     pub physics: PhysicsParams,
@@ -31,7 +31,7 @@ pub struct PhysicsFile {
 /// `calib/table.toml`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct TableFile {
+pub(crate) struct TableFile {
     pub version: u32,
     pub table: Table,
 }
@@ -73,7 +73,7 @@ impl StrikeCalib {
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct StrikeFile {
+pub(crate) struct StrikeFile {
     pub version: u32,
     pub strike: StrikeCalib,
 }

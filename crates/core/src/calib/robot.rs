@@ -217,12 +217,12 @@ impl RobotFile {
     }
 
     /// Maps a point from T to B.
-    pub fn t_to_b(&self, p_t: Vec3) -> Vec3 {
+    pub(crate) fn t_to_b(&self, p_t: Vec3) -> Vec3 {
         self.rotate_t_to_b(p_t - Vec3::from(self.cell.base_in_table_xyz_m))
     }
 
     /// Rotates a direction (velocity) from T to B.
-    pub fn rotate_t_to_b(&self, v_t: Vec3) -> Vec3 {
+    pub(crate) fn rotate_t_to_b(&self, v_t: Vec3) -> Vec3 {
         let (s, c) = self.cell.base_yaw_in_table_deg.to_radians().sin_cos();
         Vec3::new(c * v_t.x + s * v_t.y, -s * v_t.x + c * v_t.y, v_t.z)
     }
@@ -233,7 +233,7 @@ impl RobotFile {
     }
 
     /// The sensor cycle, s.
-    pub fn cycle_s(&self) -> f64 {
+    pub(crate) fn cycle_s(&self) -> f64 {
         self.rsi.cycle_ms as f64 * 1e-3
     }
 }

@@ -15,13 +15,13 @@ use nalgebra::{Matrix3, SMatrix, SVector};
 use crate::physics::{BallState, Event, Propagator, StopAt, Vec3};
 
 pub type M9 = SMatrix<f64, 9, 9>;
-pub type V9 = SVector<f64, 9>;
+pub(crate) type V9 = SVector<f64, 9>;
 
 /// Longest step of the covariance propagation, s.
-pub const COV_STEP: f64 = 0.01;
+pub(crate) const COV_STEP: f64 = 0.01;
 
 /// χ² (3 dof) at 99.9 %: observations farther than this are rejected.
-pub const GATE_CHI2: f64 = 16.27;
+pub(crate) const GATE_CHI2: f64 = 16.27;
 
 /// Noise settings.
 #[derive(Copy, Clone, Debug, PartialEq)]
@@ -220,7 +220,7 @@ impl Ekf {
     /// covariance `r`: the information from the logo fused with what the
     /// trajectory taught the filter, unless the χ² gate says the two
     /// disagree (an aliased or mis-detected logo).
-    pub fn update_spin(&mut self, z: &Vec3, r: &Matrix3<f64>) -> Update {
+    pub(crate) fn update_spin(&mut self, z: &Vec3, r: &Matrix3<f64>) -> Update {
         let y = z - Vec3::new(self.x[6], self.x[7], self.x[8]);
         let s = self.p.fixed_view::<3, 3>(6, 6).into_owned() + r;
         let Some(s_inv) = s.try_inverse() else {

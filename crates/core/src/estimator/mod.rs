@@ -30,14 +30,14 @@ use ekf::{Ekf, EkfNoise, Update};
 pub use stroke::Withheld;
 
 /// Observations collected before a candidate becomes a track.
-pub const ACQUIRE_LEN: usize = 8;
+pub(crate) const ACQUIRE_LEN: usize = 8;
 /// Capacity of the pre-bounce window the spin is refitted over (≈ 1 s at
 /// 250 Hz: longer than any flight to the bounce).
-pub const WINDOW_CAP: usize = 256;
+pub(crate) const WINDOW_CAP: usize = 256;
 /// Rejections in a row after which a track is given up.
-pub const MAX_CONSECUTIVE_REJECTS: usize = 4;
+pub(crate) const MAX_CONSECUTIVE_REJECTS: usize = 4;
 /// Capacity of the event list of one step.
-pub const EVENTS_CAP: usize = 8;
+pub(crate) const EVENTS_CAP: usize = 8;
 
 /// Where the plan's spin comes from.
 #[derive(Copy, Clone, Debug, PartialEq, Eq)]

@@ -23,7 +23,7 @@ pub enum Withheld {
 }
 
 /// The bat's orientation for a ball with spin `spin` crossing at `y`.
-pub fn bat_orientation(cal: &StrikeCalib, spin: &Vec3, y: f64) -> EulerZyx {
+pub(crate) fn bat_orientation(cal: &StrikeCalib, spin: &Vec3, y: f64) -> EulerZyx {
     // β = +β_top at ω_y = +ω_ref, β_back at −ω_ref, linear between, clamped.
     let u = (spin.y / cal.spin_ref).clamp(-1.0, 1.0);
     let (top, back) = (cal.beta_topspin_deg.to_radians(), cal.beta_backspin_deg.to_radians());
@@ -36,7 +36,7 @@ pub fn bat_orientation(cal: &StrikeCalib, spin: &Vec3, y: f64) -> EulerZyx {
 }
 
 /// The bat velocity at the hit: `bat_speed` towards the opponent (−x).
-pub fn bat_velocity(cal: &StrikeCalib) -> Vec3 {
+pub(crate) fn bat_velocity(cal: &StrikeCalib) -> Vec3 {
     Vec3::new(-cal.bat_speed, 0.0, 0.0)
 }
 

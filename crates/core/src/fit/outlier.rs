@@ -23,9 +23,9 @@ use super::Sample;
 use crate::physics::Vec3;
 
 /// How many observations at the start of a trajectory are checked.
-pub const START_WINDOW: usize = 20;
+pub(crate) const START_WINDOW: usize = 20;
 /// How many accepted observations each local fit uses.
-pub const LOCAL_FIT_LEN: usize = 5;
+pub(crate) const LOCAL_FIT_LEN: usize = 5;
 
 /// Settings of the start filter.
 #[derive(Copy, Clone, Debug, PartialEq)]

@@ -5,7 +5,7 @@
 use crate::physics::{BallState, Event, Propagator, StopAt, Vec3};
 
 /// How far ahead a prediction integrates at most, s.
-pub const PREDICTION_HORIZON: f64 = 2.0;
+pub(crate) const PREDICTION_HORIZON: f64 = 2.0;
 
 /// A predicted table contact.
 #[derive(Copy, Clone, Debug, PartialEq)]

@@ -16,7 +16,7 @@ use crate::physics::{BallState, Propagator, Vec3};
 /// The fewest samples a flight needs for a fit.
 pub const MIN_SAMPLES: usize = 8;
 /// The fewest samples after an observed bounce that are fitted on their own.
-pub const MIN_POST_BOUNCE: usize = 6;
+pub(crate) const MIN_POST_BOUNCE: usize = 6;
 
 /// Which spin fit.
 #[derive(Copy, Clone, Debug, PartialEq, Eq)]
@@ -112,7 +112,7 @@ fn validate(samples: &[Sample]) -> Result<(), FitError> {
 /// The index of the lowest sample of the first observed table contact: a
 /// local minimum of z near the surface with the ball clearly falling into
 /// it and rising out of it.
-pub fn find_bounce(samples: &[Sample], radius: f64) -> Option<usize> {
+pub(crate) fn find_bounce(samples: &[Sample], radius: f64) -> Option<usize> {
     let z = |i: usize| samples[i].pos.z;
     (2..samples.len().saturating_sub(2)).find(|&i| {
         z(i) < radius + 0.04

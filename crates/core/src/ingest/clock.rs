@@ -13,14 +13,14 @@ use heapless::Deque;
 use crate::time::Instant;
 
 /// Datagrams the sliding minimum spans (≈ 2 s at 250 Hz).
-pub const CLOCK_WINDOW: usize = 512;
+pub(crate) const CLOCK_WINDOW: usize = 512;
 
 /// A clock jump: the apparent delay moved by more than this, ns.
-pub const JUMP_NS: i128 = 50_000_000;
+pub(crate) const JUMP_NS: i128 = 50_000_000;
 
 /// Datagrams in a row far above the minimum that mean the tracker clock
 /// went back (a few late datagrams alone do not).
-pub const JUMP_RUN: usize = 8;
+pub(crate) const JUMP_RUN: usize = 8;
 
 /// Tracker clock → our clock.
 #[derive(Debug, Clone)]
@@ -48,7 +48,7 @@ impl ClockMap {
 
     /// The current offset (our time = tracker time + offset), ns, if any
     /// datagram has been seen.
-    pub fn offset_ns(&self) -> Option<i128> {
+    pub(crate) fn offset_ns(&self) -> Option<i128> {
         self.window.front().map(|&(_, d)| d - self.fixed_latency_ns)
     }
 

@@ -21,7 +21,7 @@ pub use clock::ClockMap;
 
 /// A sequence number this far behind the last accepted one means the
 /// tracker restarted.
-pub const RESTART_GAP: u32 = 10_000;
+pub(crate) const RESTART_GAP: u32 = 10_000;
 
 /// An observation ready for the estimator.
 #[derive(Copy, Clone, Debug, PartialEq)]

@@ -7,13 +7,13 @@
 
 /// Fraction of the strongest background difference in the crop at which a
 /// pixel counts as ball.
-pub const BALL_THRESHOLD_FRACTION: f32 = 0.3;
+pub(crate) const BALL_THRESHOLD_FRACTION: f32 = 0.3;
 
 /// The least background difference (sum over R, G, B) that can be ball.
-pub const BALL_THRESHOLD_MIN: u16 = 40;
+pub(crate) const BALL_THRESHOLD_MIN: u16 = 40;
 
 /// The least area of a ball blob, px.
-pub const BALL_MIN_AREA: usize = 30;
+pub(crate) const BALL_MIN_AREA: usize = 30;
 
 /// A measured ball circle in full-sensor pixels.
 #[derive(Copy, Clone, Debug, PartialEq)]

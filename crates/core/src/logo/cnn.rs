@@ -36,13 +36,13 @@ use crate::physics::Vec3;
 /// Side of the network's input, px (the crops TTI1 carries).
 pub const INPUT_SIZE: usize = 60;
 /// Floats per crop.
-pub const INPUT_LEN: usize = 3 * INPUT_SIZE * INPUT_SIZE;
+pub(crate) const INPUT_LEN: usize = 3 * INPUT_SIZE * INPUT_SIZE;
 /// Most crops per inference call (the paper's batch of 5).
 pub const MAX_BATCH: usize = 5;
 /// The default visibility threshold.
 pub const VISIBLE_THRESHOLD: f32 = 0.5;
 /// Environment variable naming the ONNX Runtime shared library.
-pub const ORT_DYLIB_ENV: &str = "ORT_DYLIB_PATH";
+pub(crate) const ORT_DYLIB_ENV: &str = "ORT_DYLIB_PATH";
 
 /// Which inference engine runs the model.
 #[derive(Clone, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize, clap::ValueEnum)]
@@ -308,7 +308,7 @@ pub fn fit_crops(
 }
 
 /// The committed compact model, relative to the repository root.
-pub const DEFAULT_MODEL: &str = "models/logo-compact.onnx";
+pub(crate) const DEFAULT_MODEL: &str = "models/logo-compact.onnx";
 
 /// The default model's path: `$TOPSPIN_LOGO_MODEL`, else [`DEFAULT_MODEL`]
 /// at the workspace root when it exists (a source checkout), else

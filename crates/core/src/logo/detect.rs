@@ -26,7 +26,7 @@ use crate::logo::view::BallView;
 use crate::physics::Vec3;
 
 /// Cells per side of the reference grid over the ball's disc.
-pub const REF_GRID: usize = 24;
+pub(crate) const REF_GRID: usize = 24;
 
 /// An RGB8 crop placed on the sensor.
 #[derive(Copy, Clone, Debug)]

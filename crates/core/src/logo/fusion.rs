@@ -30,14 +30,14 @@ pub struct SpinEstimate {
 /// Floors on the logo's uncertainty: the rotation fit's residuals of a
 /// clean sequence can be tiny, but the renderer's truth says the estimate
 /// is rarely better than this (`topspin logo --eval`).
-pub const LOGO_MIN_RATE_STD: f64 = 1.5; // rad/s
-pub const LOGO_MIN_AXIS_STD: f64 = 0.03; // rad
+pub(crate) const LOGO_MIN_RATE_STD: f64 = 1.5; // rad/s
+pub(crate) const LOGO_MIN_AXIS_STD: f64 = 0.03; // rad
 
 /// The largest 1σ we call "no information", rad/s.
-pub const UNINFORMED_STD: f64 = 1e3;
+pub(crate) const UNINFORMED_STD: f64 = 1e3;
 
 /// χ² gate (3 dof, 99.9 %) on the difference of the two estimates.
-pub const GATE_CHI2: f64 = 16.27;
+pub(crate) const GATE_CHI2: f64 = 16.27;
 
 impl SpinEstimate {
     /// The trajectory's spin from the refined fit of a flight: the weak

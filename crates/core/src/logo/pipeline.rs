@@ -9,7 +9,7 @@ use crate::logo::rotation::{LogoSample, RotationFit, RotationFitConfig, Rotation
 use crate::logo::view::BallView;
 
 /// Fewest crops that make a reference (a median needs a few).
-pub const MIN_REFERENCE_CROPS: usize = 3;
+pub(crate) const MIN_REFERENCE_CROPS: usize = 3;
 
 /// One crop of a sequence: capture time (s), the pixels, and the ball's
 /// circle as the camera side measured it (full-sensor pixels).

@@ -21,13 +21,13 @@ use nalgebra::{Rotation3, Unit};
 use crate::physics::Vec3;
 
 /// Area of the circular segment of half-angle `alpha` of a disc of radius `r`.
-pub fn segment_area(alpha: f64, r: f64) -> f64 {
+pub(crate) fn segment_area(alpha: f64, r: f64) -> f64 {
     0.5 * r * r * (2.0 * alpha - (2.0 * alpha).sin())
 }
 
 /// The half-angle α ∈ [0, π] of the segment with area `area` of a disc of
 /// radius `r` (clamped to the full disc). Bisection; no allocation.
-pub fn segment_half_angle(area: f64, r: f64) -> f64 {
+pub(crate) fn segment_half_angle(area: f64, r: f64) -> f64 {
     let full = std::f64::consts::PI * r * r;
     if area.is_nan() || area <= 0.0 {
         return 0.0;
@@ -49,7 +49,7 @@ pub fn segment_half_angle(area: f64, r: f64) -> f64 {
 
 /// Distance from a disc's centre to the centroid of its segment of
 /// half-angle `alpha` (0 for the full disc).
-pub fn centroid_distance(alpha: f64, r: f64) -> f64 {
+pub(crate) fn centroid_distance(alpha: f64, r: f64) -> f64 {
     let den = 3.0 * (2.0 * alpha - (2.0 * alpha).sin());
     if den <= 1e-12 {
         // α → 0: the sliver's centroid tends to the chord at distance r.
@@ -63,7 +63,7 @@ pub fn centroid_distance(alpha: f64, r: f64) -> f64 {
 /// `area` seen (on the unit sphere) and the logo's radius `r` (in ball
 /// radii). Returns `c` unchanged where the full logo is seen or `c` lies on
 /// the view axis.
-pub fn correct(c: &Vec3, area: f64, r: f64) -> Vec3 {
+pub(crate) fn correct(c: &Vec3, area: f64, r: f64) -> Vec3 {
     let alpha = segment_half_angle(area, r);
     let d = centroid_distance(alpha, r);
     let axis = Vec3::z().cross(c);

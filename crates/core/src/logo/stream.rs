@@ -22,16 +22,16 @@ use crate::logo::fusion::SpinEstimate;
 use crate::logo::pipeline::{CropInput, LogoMethod, process_sequence};
 use crate::logo::rotation::{LogoSample, RotationFitConfig, fit_rotation};
 use crate::logo::view::BallView;
-use crate::wire::crop::crop_origin;
 use crate::time::{Duration, Instant};
 use crate::wire::crop::Crop;
+use crate::wire::crop::crop_origin;
 
 /// Crops fitted per ball (≈ 53 ms at 380 Hz).
 pub const SEQUENCE_LEN: usize = 20;
 /// Fewest crops worth a fit.
-pub const MIN_CROPS: usize = 10;
+pub(crate) const MIN_CROPS: usize = 10;
 /// A gap that ends a sequence (≈ 4 frames at 380 Hz).
-pub const SEQUENCE_GAP: Duration = Duration::from_millis(12);
+pub(crate) const SEQUENCE_GAP: Duration = Duration::from_millis(12);
 
 /// How logo positions are found.
 pub enum Method {

@@ -69,7 +69,7 @@ impl BallView {
 
     /// (x, y) in ball radii → pixel offset from the centre.
     #[inline]
-    pub fn from_disc(&self, x: f64, y: f64) -> (f64, f64) {
+    pub(crate) fn from_disc(&self, x: f64, y: f64) -> (f64, f64) {
         (self.m_inv[0] * x + self.m_inv[1] * y, self.m_inv[2] * x + self.m_inv[3] * y)
     }
 

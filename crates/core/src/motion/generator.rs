@@ -34,14 +34,14 @@ use crate::plan::StrikePlan;
 use crate::time::Instant;
 
 /// How far ahead a hit may be planned, s.
-pub const MAX_PLAN_HORIZON_S: f64 = 5.0;
+pub(crate) const MAX_PLAN_HORIZON_S: f64 = 5.0;
 /// How far outside the workspace a hit may be and still be pulled in, m.
-pub const MAX_OUTSIDE_M: f64 = 0.10;
+pub(crate) const MAX_OUTSIDE_M: f64 = 0.10;
 /// Extra room kept between a hit with velocity and the box walls, m.
-pub const WALL_MARGIN_M: f64 = 0.01;
+pub(crate) const WALL_MARGIN_M: f64 = 0.01;
 
 /// Arrival this much after the hitting time counts as on time, s.
-pub const LATE_TOLERANCE_S: f64 = 0.0005;
+pub(crate) const LATE_TOLERANCE_S: f64 = 0.0005;
 /// A refinement of the same ball (within this of the current target in
 /// time, s, and per axis, m) that would arrive late is weighed against the
 /// current, on-time stroke: near the hit the axes are in their final,
@@ -50,10 +50,10 @@ pub const LATE_TOLERANCE_S: f64 = 0.0005;
 /// at [`BALL_SPEED_AT_HIT`] by about `late_by × speed`; keeping the old
 /// stroke misses by the refinement's change. The smaller miss wins. Early
 /// refinements arrive on time and are always taken.
-pub const KEEP_MAX_DT_S: f64 = 0.010;
-pub const KEEP_MAX_DP_M: f64 = 0.15;
+pub(crate) const KEEP_MAX_DT_S: f64 = 0.010;
+pub(crate) const KEEP_MAX_DP_M: f64 = 0.15;
 /// Typical ball speed at the hitting plane (after the bounce), m/s.
-pub const BALL_SPEED_AT_HIT: f64 = 4.0;
+pub(crate) const BALL_SPEED_AT_HIT: f64 = 4.0;
 /// Duration nudges tried when Ruckig misses the hitting time, s.
 const RETRY_NUDGES_S: [f64; 4] = [-0.0003, 0.0003, -0.0007, 0.0007];
 
@@ -198,7 +198,7 @@ impl StrokeGenerator {
     }
 
     /// Checks and converts a plan to a target in B (see the module doc).
-    pub fn target_of(&self, plan: &StrikePlan) -> Result<StrokeTarget, PlanRejected> {
+    pub(crate) fn target_of(&self, plan: &StrikePlan) -> Result<StrokeTarget, PlanRejected> {
         let lim = &self.lim;
         let o = plan.orientation;
         let finite = plan.position.iter().all(|x| x.is_finite())
@@ -311,7 +311,7 @@ impl StrokeGenerator {
 
     /// Replaces the state the next plan starts from (after the safety
     /// filter changed a setpoint), and re-plans the current phase from it.
-    pub fn override_state(&mut self, p: Pose6, v: Pose6, a: Pose6) {
+    pub(crate) fn override_state(&mut self, p: Pose6, v: Pose6, a: Pose6) {
         self.p = p;
         self.v = v;
         self.a = a;

@@ -12,7 +12,7 @@ use super::Pose6;
 /// Fraction of the cell's limits the generator plans with; the safety
 /// filter enforces the full limits, so a well-behaved stroke never touches
 /// them.
-pub const GENERATOR_LIMIT_FRACTION: f64 = 0.95;
+pub(crate) const GENERATOR_LIMIT_FRACTION: f64 = 0.95;
 
 /// Everything motion needs to know about the cell, in SI.
 #[derive(Clone, Debug, PartialEq)]
@@ -66,7 +66,7 @@ impl MotionLimits {
     }
 
     /// A direction from T to B.
-    pub fn rotate_t_to_b(&self, v: Vec3) -> Vec3 {
+    pub(crate) fn rotate_t_to_b(&self, v: Vec3) -> Vec3 {
         let (s, c) = self.base_yaw.sin_cos();
         Vec3::new(c * v.x + s * v.y, -s * v.x + c * v.y, v.z)
     }
@@ -107,7 +107,7 @@ fn mat_mul(x: &Mat3, y: &Mat3) -> Mat3 {
 }
 
 /// Euler ZYX (a, b, c) of a rotation matrix.
-pub fn zyx_of(r: &Mat3) -> (f64, f64, f64) {
+pub(crate) fn zyx_of(r: &Mat3) -> (f64, f64, f64) {
     let b = (-r[2][0]).clamp(-1.0, 1.0).asin();
     let a = r[1][0].atan2(r[0][0]);
     let c = r[2][1].atan2(r[2][2]);
@@ -115,7 +115,7 @@ pub fn zyx_of(r: &Mat3) -> (f64, f64, f64) {
 }
 
 /// `x` plus a multiple of 2π, within π of `reference`.
-pub fn unwrap_near(x: f64, reference: f64) -> f64 {
+pub(crate) fn unwrap_near(x: f64, reference: f64) -> f64 {
     let tau = std::f64::consts::TAU;
     x - ((x - reference) / tau).round() * tau
 }

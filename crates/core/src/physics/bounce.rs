@@ -19,7 +19,7 @@ pub struct BounceModel {
 }
 
 /// The cap on α: at α = 2/5 the ball leaves the table rolling (no slip).
-pub const ROLLING_ALPHA: f64 = 0.4;
+pub(crate) const ROLLING_ALPHA: f64 = 0.4;
 
 impl BounceModel {
     pub fn new(restitution: f64, friction: f64, radius: f64) -> Self {
@@ -27,7 +27,7 @@ impl BounceModel {
     }
 
     /// The friction ratio α of this impact (2/5 when the ball rolls).
-    pub fn alpha(&self, vel: &Vec3, spin: &Vec3) -> f64 {
+    pub(crate) fn alpha(&self, vel: &Vec3, spin: &Vec3) -> f64 {
         let r = self.radius;
         let slip_x = vel.x - r * spin.y;
         let slip_y = vel.y + r * spin.x;
@@ -38,7 +38,7 @@ impl BounceModel {
 
     /// Velocity and spin just after an impact with velocity `vel` (v_z < 0)
     /// and spin `spin` just before it. The position is unchanged.
-    pub fn apply(&self, state: &BallState) -> BallState {
+    pub(crate) fn apply(&self, state: &BallState) -> BallState {
         let (v, w, r, e) = (state.vel, state.spin, self.radius, self.restitution);
         let a = self.alpha(&v, &w);
         let vel = Vec3::new((1.0 - a) * v.x + a * r * w.y, (1.0 - a) * v.y - a * r * w.x, -e * v.z);

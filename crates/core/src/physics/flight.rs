@@ -69,7 +69,7 @@ impl FlightModel {
     }
 
     /// Magnus coefficient at vanishing spin, k_M(0).
-    pub fn k_m0(&self) -> f64 {
+    pub(crate) fn k_m0(&self) -> f64 {
         self.lift_scale * self.lift.c_m0()
     }
 
@@ -111,7 +111,7 @@ impl FlightModel {
     /// (same direction, magnitude corrected for lift saturation). This maps
     /// a spin solved linearly with k_M(0), as in the paper's fit, onto this
     /// model. Returns `None` where no finite spin produces that much lift.
-    pub fn spin_from_linear(&self, spin_linear: &Vec3, speed: f64) -> Option<Vec3> {
+    pub(crate) fn spin_from_linear(&self, spin_linear: &Vec3, speed: f64) -> Option<Vec3> {
         match self.lift {
             LiftModel::Constant { .. } => Some(*spin_linear),
             LiftModel::Saturating { s_half, .. } => {

@@ -10,10 +10,10 @@ use super::{BallState, BounceModel, FlightModel, Table, Vec3};
 /// (`step_size_does_not_matter`), and events are located inside the step;
 /// 4 ms rather than 2 ms halves the estimator's per-observation prediction
 /// (its p99 was 63 µs at 2 ms against a 50 µs budget).
-pub const DEFAULT_STEP: f64 = 0.004;
+pub(crate) const DEFAULT_STEP: f64 = 0.004;
 
 /// Height of the floor below the table surface, m (ITTF: 0.76).
-pub const FLOOR_DEPTH: f64 = 0.76;
+pub(crate) const FLOOR_DEPTH: f64 = 0.76;
 
 /// Where to stop a propagation.
 #[derive(Copy, Clone, Debug, PartialEq)]
@@ -86,7 +86,7 @@ impl Propagator {
 
     /// One RK4 step of length `h` (spin constant in flight).
     #[inline]
-    pub fn rk4(&self, s: &BallState, h: f64) -> BallState {
+    pub(crate) fn rk4(&self, s: &BallState, h: f64) -> BallState {
         let f = &self.flight;
         let w = &s.spin;
         let v1 = s.vel;

@@ -37,13 +37,13 @@ impl Table {
     }
 
     /// True when the point (x, y) lies on the playing surface.
-    pub fn on_surface(&self, x: f64, y: f64) -> bool {
+    pub(crate) fn on_surface(&self, x: f64, y: f64) -> bool {
         x.abs() <= self.length / 2.0 && y.abs() <= self.width / 2.0
     }
 
     /// True when a ball of radius `r` centred at `p` touches the net (a thin
     /// vertical sheet at x = 0).
-    pub fn touches_net(&self, p: &Vec3, r: f64) -> bool {
+    pub(crate) fn touches_net(&self, p: &Vec3, r: f64) -> bool {
         p.x.abs() <= r && p.z <= self.net_height + r && p.z >= -r && p.y.abs() <= self.net_length / 2.0 + r
     }
 }

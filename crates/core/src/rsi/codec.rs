@@ -16,9 +16,9 @@ use super::xml::{Attrs, Scanner, Token, XmlError, attr, trim};
 /// The most decimals [`SenFrame::emit`] writes.
 pub const MAX_PRECISION: u8 = 9;
 /// The largest magnitude a number may have to be emitted.
-pub const MAX_ABS_VALUE: f64 = 1e9;
+pub(crate) const MAX_ABS_VALUE: f64 = 1e9;
 /// The longest `Type` / `EStr` text accepted for emitting.
-pub const MAX_TEXT_LEN: usize = 64;
+pub(crate) const MAX_TEXT_LEN: usize = 64;
 
 /// A Cartesian pose as KUKA writes it: X, Y, Z in mm; A, B, C in degrees.
 #[derive(Copy, Clone, Debug, Default, PartialEq)]
@@ -41,7 +41,7 @@ impl KukaPose {
 }
 
 /// Axis angles A1..A6 in degrees.
-pub type Axes = [f64; 6];
+pub(crate) type Axes = [f64; 6];
 
 /// Why a datagram could not be parsed or emitted.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]

@@ -34,9 +34,9 @@ use crate::plan::StrikePlan;
 use crate::time::{Duration, Instant};
 
 /// Events kept until polled; older ones are dropped (and counted) beyond.
-pub const EVENT_CAPACITY: usize = 64;
+pub(crate) const EVENT_CAPACITY: usize = 64;
 /// Cycles per block of the IPOC → clock offset minimum filter.
-pub const CLOCK_WINDOW_CYCLES: u32 = 1024;
+pub(crate) const CLOCK_WINDOW_CYCLES: u32 = 1024;
 /// The largest answer [`RsiSession::handle_datagram`] writes, bytes.
 pub const MAX_ANSWER_LEN: usize = 512;
 

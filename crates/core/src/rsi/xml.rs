@@ -154,13 +154,13 @@ pub fn trim(mut s: &[u8]) -> &[u8] {
 
 /// Iterates over `name="value"` pairs of an attribute slice.
 #[derive(Clone, Debug)]
-pub struct Attrs<'a> {
+pub(crate) struct Attrs<'a> {
     b: &'a [u8],
     i: usize,
 }
 
 impl<'a> Attrs<'a> {
-    pub fn new(b: &'a [u8]) -> Self {
+    pub(crate) fn new(b: &'a [u8]) -> Self {
         Attrs { b, i: 0 }
     }
 }

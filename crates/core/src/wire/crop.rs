@@ -21,17 +21,17 @@
 use crate::time::Instant;
 
 /// Bytes before the pixels.
-pub const CROP_HEADER_LEN: usize = 36;
+pub(crate) const CROP_HEADER_LEN: usize = 36;
 /// Largest crop side, px.
 pub const CROP_MAX_SIDE: u16 = 96;
 /// Largest datagram: a 96 × 96 RGB8 crop.
 pub const CROP_MAX_LEN: usize = CROP_HEADER_LEN + 3 * 96 * 96;
 /// The four bytes every crop datagram starts with.
-pub const CROP_MAGIC: [u8; 4] = *b"TTI1";
+pub(crate) const CROP_MAGIC: [u8; 4] = *b"TTI1";
 /// Pixel format 0: 8-bit R, G, B.
-pub const FORMAT_RGB8: u8 = 0;
+pub(crate) const FORMAT_RGB8: u8 = 0;
 /// The largest |u|, |v| accepted, px (sensors are far smaller).
-pub const CROP_MAX_COORD: f32 = 65_536.0;
+pub(crate) const CROP_MAX_COORD: f32 = 65_536.0;
 
 /// Why a datagram is not a usable crop.
 #[derive(Copy, Clone, Debug, PartialEq, thiserror::Error)]

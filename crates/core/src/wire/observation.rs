@@ -25,29 +25,29 @@ use crate::time::Instant;
 pub const OBSERVATION_LEN: usize = 36;
 
 /// The four bytes every observation datagram starts with.
-pub const OBSERVATION_MAGIC: [u8; 4] = *b"TTB1";
+pub(crate) const OBSERVATION_MAGIC: [u8; 4] = *b"TTB1";
 
 /// Flag bit 0: the tracker believes this is a ball.
-pub const FLAG_VALID: u16 = 0x0001;
+pub(crate) const FLAG_VALID: u16 = 0x0001;
 
 /// Flag bits that must be zero (all but [`FLAG_VALID`]).
-pub const FLAGS_RESERVED: u16 = !FLAG_VALID;
+pub(crate) const FLAGS_RESERVED: u16 = !FLAG_VALID;
 
 /// The generous box around the table (table frame, m) outside which a
 /// position is rejected as implausible: |x| ≤ 4, |y| ≤ 3, −1 ≤ z ≤ 4.
 /// The table is 2.74 × 1.525 m, the floor 0.76 m below its surface.
-pub const POSITION_BOX: PositionBox = PositionBox { min: [-4.0, -3.0, -1.0], max: [4.0, 3.0, 4.0] };
+pub(crate) const POSITION_BOX: PositionBox = PositionBox { min: [-4.0, -3.0, -1.0], max: [4.0, 3.0, 4.0] };
 
 /// An axis-aligned box in the table frame, m.
 #[derive(Copy, Clone, Debug, PartialEq)]
-pub struct PositionBox {
+pub(crate) struct PositionBox {
     pub min: [f32; 3],
     pub max: [f32; 3],
 }
 
 impl PositionBox {
     /// True when `p` lies inside the box (bounds included).
-    pub fn contains(&self, p: &[f32; 3]) -> bool {
+    pub(crate) fn contains(&self, p: &[f32; 3]) -> bool {
         (0..3).all(|i| p[i] >= self.min[i] && p[i] <= self.max[i])
     }
 }
@@ -159,7 +159,7 @@ impl<T: AsRef<[u8]>> ObservationPacket<T> {
 impl<T: AsRef<[u8]> + AsMut<[u8]>> ObservationPacket<T> {
     /// Wraps a buffer of [`OBSERVATION_LEN`] bytes for writing and stamps
     /// the magic. Fails (without touching it) on any other length.
-    pub fn new_emit(mut buffer: T) -> Result<Self, WireError> {
+    pub(crate) fn new_emit(mut buffer: T) -> Result<Self, WireError> {
         let len = buffer.as_ref().len();
         if len != OBSERVATION_LEN {
             return Err(WireError::WrongLength { len });
@@ -224,7 +224,7 @@ impl Observation {
     }
 
     /// Validates the fields of a checked packet.
-    pub fn from_packet<T: AsRef<[u8]>>(p: &ObservationPacket<T>) -> Result<Observation, WireError> {
+    pub(crate) fn from_packet<T: AsRef<[u8]>>(p: &ObservationPacket<T>) -> Result<Observation, WireError> {
         let pos = p.position();
         if !pos.iter().all(|c| c.is_finite()) {
             return Err(WireError::NonFinite);

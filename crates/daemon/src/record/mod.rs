@@ -76,17 +76,17 @@ pub const TOPIC_RSI: &str = "/rsi/exchange";
 /// Topic of the periodic counters.
 pub const TOPIC_COUNTERS: &str = "/telemetry/counters";
 /// Attachment holding the effective configuration.
-pub const ATTACHMENT_CONFIG: &str = "config.toml";
+pub(crate) const ATTACHMENT_CONFIG: &str = "config.toml";
 /// Prefix of the attachments holding the calibration files.
-pub const ATTACHMENT_CALIB_PREFIX: &str = "calib/";
+pub(crate) const ATTACHMENT_CALIB_PREFIX: &str = "calib/";
 /// The calibration files a recording carries (as in `calib/`).
-pub const CALIB_FILES: [&str; 4] = ["physics.toml", "table.toml", "strike.toml", "robot.toml"];
+pub(crate) const CALIB_FILES: [&str; 4] = ["physics.toml", "table.toml", "strike.toml", "robot.toml"];
 /// Uncompressed size at which a chunk closes by itself, bytes.
-pub const CHUNK_SIZE: u64 = 256 * 1024;
+pub(crate) const CHUNK_SIZE: u64 = 256 * 1024;
 /// The MCAP profile field (and the name of the metadata record).
-pub const PROFILE: &str = "topspin";
+pub(crate) const PROFILE: &str = "topspin";
 /// Metadata key: log time − the daemon's monotonic clock, ns (log times are wall clock).
-pub const META_LOG_TIME_OFFSET: &str = "log_time_offset_ns";
+pub(crate) const META_LOG_TIME_OFFSET: &str = "log_time_offset_ns";
 
 /// A recording that cannot be written or read.
 #[derive(Debug, thiserror::Error)]
@@ -130,7 +130,7 @@ pub fn calib_files(dir: Option<&std::path::Path>) -> Result<Vec<(String, String)
 }
 
 /// Lower-case hex of `bytes`.
-pub fn to_hex(bytes: &[u8]) -> String {
+pub(crate) fn to_hex(bytes: &[u8]) -> String {
     const DIGITS: &[u8; 16] = b"0123456789abcdef";
     let mut s = String::with_capacity(bytes.len() * 2);
     for b in bytes {
@@ -141,7 +141,7 @@ pub fn to_hex(bytes: &[u8]) -> String {
 }
 
 /// The bytes of a hex string (either case); `None` if it is not hex.
-pub fn from_hex(s: &str) -> Option<Vec<u8>> {
+pub(crate) fn from_hex(s: &str) -> Option<Vec<u8>> {
     if !s.len().is_multiple_of(2) {
         return None;
     }
@@ -157,7 +157,7 @@ fn nan_if_null<'de, D: serde::Deserializer<'de>>(d: D) -> Result<f64, D::Error> 
 
 /// A vector as Foxglove plots it.
 #[derive(Copy, Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct XyzMsg {
+pub(crate) struct XyzMsg {
     #[serde(deserialize_with = "nan_if_null")]
     pub x: f64,
     #[serde(deserialize_with = "nan_if_null")]
@@ -174,7 +174,7 @@ impl From<Vec3> for XyzMsg {
 
 /// The decoded fields of a TTB1 datagram (for plots; replay uses the bytes).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct ObservationMsg {
+pub(crate) struct ObservationMsg {
     pub seq: u32,
     pub capture_ns: u64,
     pub x: f32,
@@ -188,7 +188,7 @@ pub struct ObservationMsg {
 
 /// A message on [`TOPIC_DATAGRAM`].
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct DatagramMsg {
+pub(crate) struct DatagramMsg {
     pub arrival_ns: u64,
     /// The sender, "IP:PORT".
     pub from: String,
@@ -216,7 +216,7 @@ impl DatagramMsg {
 
 /// A message on [`TOPIC_PLAN`].
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct PlanMsg {
+pub(crate) struct PlanMsg {
     pub seq: u32,
     pub trajectory: u32,
     pub made_at_ns: u64,
@@ -237,7 +237,7 @@ pub struct PlanMsg {
 
 /// Bat orientation, KUKA ZYX Euler angles in radians.
 #[derive(Copy, Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct EulerMsg {
+pub(crate) struct EulerMsg {
     #[serde(deserialize_with = "nan_if_null")]
     pub a: f64,
     #[serde(deserialize_with = "nan_if_null")]
@@ -247,7 +247,7 @@ pub struct EulerMsg {
 }
 
 /// The plan's floats in the order of [`PlanMsg::f64_bits`].
-pub fn plan_floats(p: &StrikePlan) -> [f64; 13] {
+pub(crate) fn plan_floats(p: &StrikePlan) -> [f64; 13] {
     let o = &p.orientation;
     [
         p.position.x,
@@ -286,7 +286,7 @@ impl From<&StrikePlan> for PlanMsg {
 
 impl PlanMsg {
     /// The exact plan: times from the `*_ns` fields, floats from `f64_bits`.
-    pub fn to_plan(&self) -> Option<StrikePlan> {
+    pub(crate) fn to_plan(&self) -> Option<StrikePlan> {
         if self.f64_bits.len() != 13 {
             return None;
         }
@@ -310,7 +310,7 @@ impl PlanMsg {
 
 /// A message on [`TOPIC_RSI`].
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct RsiMsg {
+pub(crate) struct RsiMsg {
     pub arrival_ns: u64,
     pub sent_ns: u64,
     /// The controller's datagram as text (absent when not UTF-8: see `request_hex`).
@@ -349,22 +349,22 @@ impl RsiMsg {
     }
 
     /// The request's bytes.
-    pub fn request_bytes(&self) -> Option<Vec<u8>> {
+    pub(crate) fn request_bytes(&self) -> Option<Vec<u8>> {
         Self::bytes(&self.request, &self.request_hex)
     }
 
     /// The answer's bytes.
-    pub fn answer_bytes(&self) -> Option<Vec<u8>> {
+    pub(crate) fn answer_bytes(&self) -> Option<Vec<u8>> {
         Self::bytes(&self.answer, &self.answer_hex)
     }
 }
 
 /// JSON Schemas of the channels (draft 2020-12), for Foxglove.
 pub mod schema {
-    pub const DATAGRAM: &str = r#"{"$schema":"https://json-schema.org/draft/2020-12/schema","title":"topspin.TrackerDatagram","description":"One UDP datagram from the tracker (TTB1, DESIGN 5.1) as it arrived","type":"object","properties":{"arrival_ns":{"type":"integer","description":"arrival, daemon monotonic clock, ns"},"from":{"type":"string","description":"sender IP:PORT"},"hex":{"type":"string","description":"the datagram's bytes, lower-case hex"},"observation":{"description":"decoded TTB1 fields, null if the datagram does not parse","anyOf":[{"type":"null"},{"type":"object","properties":{"seq":{"type":"integer"},"capture_ns":{"type":"integer","description":"tracker clock"},"x":{"type":"number"},"y":{"type":"number"},"z":{"type":"number"},"residual":{"type":["number","null"]},"cameras":{"type":"integer"},"valid":{"type":"boolean"}}}]}},"required":["arrival_ns","from","hex","observation"]}"#;
-    pub const PLAN: &str = r#"{"$schema":"https://json-schema.org/draft/2020-12/schema","title":"topspin.StrikePlan","description":"A strike plan the estimator published; table frame, SI units; a null number is NaN or infinite (exact values in f64_bits)","type":"object","properties":{"seq":{"type":"integer"},"trajectory":{"type":"integer"},"made_at_ns":{"type":"integer"},"hit_time_ns":{"type":"integer"},"lead_s":{"type":["number","null"]},"position":{"type":"object","properties":{"x":{"type":["number","null"]},"y":{"type":["number","null"]},"z":{"type":["number","null"]}},"required":["x","y","z"]},"velocity":{"type":"object","properties":{"x":{"type":["number","null"]},"y":{"type":["number","null"]},"z":{"type":["number","null"]}},"required":["x","y","z"]},"orientation":{"type":"object","properties":{"a":{"type":["number","null"]},"b":{"type":["number","null"]},"c":{"type":["number","null"]}},"required":["a","b","c"]},"spin":{"type":"object","properties":{"x":{"type":["number","null"]},"y":{"type":["number","null"]},"z":{"type":["number","null"]}},"required":["x","y","z"]},"confidence":{"type":["number","null"]},"f64_bits":{"type":"array","description":"IEEE bits of position xyz, velocity xyz, orientation abc, spin xyz, confidence (16 hex digits each)","items":{"type":"string"},"minItems":13,"maxItems":13}},"required":["seq","trajectory","made_at_ns","hit_time_ns","position","velocity","orientation","spin","confidence","f64_bits"]}"#;
+    pub(crate) const DATAGRAM: &str = r#"{"$schema":"https://json-schema.org/draft/2020-12/schema","title":"topspin.TrackerDatagram","description":"One UDP datagram from the tracker (TTB1, DESIGN 5.1) as it arrived","type":"object","properties":{"arrival_ns":{"type":"integer","description":"arrival, daemon monotonic clock, ns"},"from":{"type":"string","description":"sender IP:PORT"},"hex":{"type":"string","description":"the datagram's bytes, lower-case hex"},"observation":{"description":"decoded TTB1 fields, null if the datagram does not parse","anyOf":[{"type":"null"},{"type":"object","properties":{"seq":{"type":"integer"},"capture_ns":{"type":"integer","description":"tracker clock"},"x":{"type":"number"},"y":{"type":"number"},"z":{"type":"number"},"residual":{"type":["number","null"]},"cameras":{"type":"integer"},"valid":{"type":"boolean"}}}]}},"required":["arrival_ns","from","hex","observation"]}"#;
+    pub(crate) const PLAN: &str = r#"{"$schema":"https://json-schema.org/draft/2020-12/schema","title":"topspin.StrikePlan","description":"A strike plan the estimator published; table frame, SI units; a null number is NaN or infinite (exact values in f64_bits)","type":"object","properties":{"seq":{"type":"integer"},"trajectory":{"type":"integer"},"made_at_ns":{"type":"integer"},"hit_time_ns":{"type":"integer"},"lead_s":{"type":["number","null"]},"position":{"type":"object","properties":{"x":{"type":["number","null"]},"y":{"type":["number","null"]},"z":{"type":["number","null"]}},"required":["x","y","z"]},"velocity":{"type":"object","properties":{"x":{"type":["number","null"]},"y":{"type":["number","null"]},"z":{"type":["number","null"]}},"required":["x","y","z"]},"orientation":{"type":"object","properties":{"a":{"type":["number","null"]},"b":{"type":["number","null"]},"c":{"type":["number","null"]}},"required":["a","b","c"]},"spin":{"type":"object","properties":{"x":{"type":["number","null"]},"y":{"type":["number","null"]},"z":{"type":["number","null"]}},"required":["x","y","z"]},"confidence":{"type":["number","null"]},"f64_bits":{"type":"array","description":"IEEE bits of position xyz, velocity xyz, orientation abc, spin xyz, confidence (16 hex digits each)","items":{"type":"string"},"minItems":13,"maxItems":13}},"required":["seq","trajectory","made_at_ns","hit_time_ns","position","velocity","orientation","spin","confidence","f64_bits"]}"#;
     pub const RSI: &str = r#"{"$schema":"https://json-schema.org/draft/2020-12/schema","title":"topspin.RsiExchange","description":"One RSI exchange: the KR C4's datagram and our answer","type":"object","properties":{"arrival_ns":{"type":"integer"},"sent_ns":{"type":"integer"},"request":{"type":"string","description":"the controller's XML"},"request_hex":{"type":"string","description":"instead of request when not UTF-8"},"answer":{"type":"string","description":"our XML"},"answer_hex":{"type":"string","description":"instead of answer when not UTF-8"}},"required":["arrival_ns","sent_ns"]}"#;
-    pub const COUNTERS: &str = r#"{"$schema":"https://json-schema.org/draft/2020-12/schema","title":"topspin.Counters","description":"The daemon's counters (ingest, estimator, rsi, rings), as the telemetry thread sends them","type":"object"}"#;
+    pub(crate) const COUNTERS: &str = r#"{"$schema":"https://json-schema.org/draft/2020-12/schema","title":"topspin.Counters","description":"The daemon's counters (ingest, estimator, rsi, rings), as the telemetry thread sends them","type":"object"}"#;
 }
 
 #[cfg(test)]

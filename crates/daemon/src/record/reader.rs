@@ -10,8 +10,8 @@ use super::{
     ATTACHMENT_CALIB_PREFIX, ATTACHMENT_CONFIG, DatagramMsg, META_LOG_TIME_OFFSET, PROFILE, PlanMsg, RecordError,
     RsiMsg, TOPIC_COUNTERS, TOPIC_DATAGRAM, TOPIC_PLAN, TOPIC_RSI, from_hex,
 };
-use topspin_core::calib::Calibration;
 use crate::config::DaemonConfig;
+use topspin_core::calib::Calibration;
 use topspin_core::plan::StrikePlan;
 use topspin_core::time::Instant;
 

@@ -53,7 +53,7 @@ impl ReplayReport {
 }
 
 /// The names of the fields in which two plans differ (floats by their bits).
-pub fn differing_fields(a: &StrikePlan, b: &StrikePlan) -> Vec<String> {
+pub(crate) fn differing_fields(a: &StrikePlan, b: &StrikePlan) -> Vec<String> {
     const NAMES: [&str; 13] = [
         "position.x",
         "position.y",
@@ -91,7 +91,7 @@ pub fn differing_fields(a: &StrikePlan, b: &StrikePlan) -> Vec<String> {
 }
 
 /// The plans the daemon's ingest and estimator make from the recorded datagrams.
-pub fn replay_plans(session: &Session) -> Result<(Vec<StrikePlan>, IngestCounters), RecordError> {
+pub(crate) fn replay_plans(session: &Session) -> Result<(Vec<StrikePlan>, IngestCounters), RecordError> {
     let cal = session.calibration()?;
     let cfg = &session.config;
     let mut ingest = Ingest::new(Some(cfg.network.tracker_source), cfg.fixed_latency_ns());

@@ -3,8 +3,8 @@
 //! write is logged once and recording stops, the robot does not.
 
 use super::Recorder;
-use topspin_core::plan::StrikePlan;
 use crate::runtime::telemetry::{DatagramRecord, RsiRecord, TelemetrySink};
+use topspin_core::plan::StrikePlan;
 use topspin_core::time::Instant;
 
 /// A [`Recorder`] fed by the telemetry thread.

@@ -12,10 +12,10 @@ use super::{
     ATTACHMENT_CALIB_PREFIX, ATTACHMENT_CONFIG, CHUNK_SIZE, DatagramMsg, META_LOG_TIME_OFFSET, PROFILE, PlanMsg,
     RecordError, RsiMsg, TOPIC_COUNTERS, TOPIC_DATAGRAM, TOPIC_PLAN, TOPIC_RSI, schema,
 };
+use crate::channels::{TOPICS, Topic};
 use crate::config::DaemonConfig;
 use topspin_core::plan::StrikePlan;
 use topspin_core::time::Instant;
-use crate::channels::{TOPICS, Topic};
 
 /// A buffered file whose `flush` also reaches the disk (`fdatasync`).
 struct SyncFile {

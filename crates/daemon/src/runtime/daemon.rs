@@ -22,6 +22,8 @@ use super::telemetry::{
     self, DatagramRecord, LOGO_CROP_SIDE, LOGO_RING, LogoRecord, RECORDED_DATAGRAM, RECORDED_RSI, RSI_BYTES_RING,
     RsiRecord, TELEMETRY_RING, Telemetry, TelemetryInputs, TelemetrySink, TelemetrySummary, TelemetryTx,
 };
+use crate::clock;
+use crate::rsi_server::{PlanReader, RsiServer, RsiSink, WaitStrategy, plan_slot};
 use topspin_core::calib::Calibration;
 use topspin_core::calib::camera::CameraCalib;
 use topspin_core::estimator::{Estimator, EstimatorConfig, LogoSpin};
@@ -31,27 +33,25 @@ use topspin_core::logo::cnn::{Backend, LogoCnn};
 use topspin_core::logo::pipeline::LogoMethod;
 use topspin_core::logo::stream::{LogoCounters, LogoStream, Method};
 use topspin_core::motion::generator::Phase;
-use crate::rsi_server::{PlanReader, RsiServer, RsiSink, WaitStrategy, plan_slot};
 use topspin_core::rsi::session::{RsiSession, SessionConfig, SessionEvent, SessionStats};
-use crate::clock;
 use topspin_core::time::{Duration, Instant};
 use topspin_core::wire::crop::{CROP_MAX_LEN, Crop};
 
 /// Capacity of the logo → estimator ring, spins (one per ball).
-pub const LOGO_SPIN_RING: usize = 8;
+pub(crate) const LOGO_SPIN_RING: usize = 8;
 /// Receive timeout of the logo socket: ends quiet sequences, looks at the stop flag.
-pub const LOGO_POLL: std::time::Duration = std::time::Duration::from_millis(5);
+pub(crate) const LOGO_POLL: std::time::Duration = std::time::Duration::from_millis(5);
 /// Capacity of the ingest → estimator ring, observations.
-pub const OBSERVATION_RING: usize = 1024;
+pub(crate) const OBSERVATION_RING: usize = 1024;
 /// Largest tracker datagram read; longer ones are truncated (and malformed).
-pub const MAX_TRACKER_DATAGRAM: usize = 512;
+pub(crate) const MAX_TRACKER_DATAGRAM: usize = 512;
 /// Receive timeout of the ingest socket: only for looking at the stop flag.
-pub const INGEST_POLL: std::time::Duration = std::time::Duration::from_millis(20);
+pub(crate) const INGEST_POLL: std::time::Duration = std::time::Duration::from_millis(20);
 /// The estimator's idle wait when it blocks (it is unparked by ingest).
-pub const ESTIMATOR_PARK: std::time::Duration = std::time::Duration::from_millis(5);
+pub(crate) const ESTIMATOR_PARK: std::time::Duration = std::time::Duration::from_millis(5);
 /// Longest drain after a stop request (the systemd unit's TimeoutStopSec
 /// must exceed it).
-pub const MAX_DRAIN: Duration = Duration::from_millis(5000);
+pub(crate) const MAX_DRAIN: Duration = Duration::from_millis(5000);
 
 /// Called first thing on every daemon thread with its role ("ingest",
 /// "estimator", "rsi", "telemetry"): a seam for tests (the counting

@@ -48,7 +48,7 @@ impl fmt::Display for RtWarning {
 }
 
 /// Pins the calling thread to `core`.
-pub fn pin_current(thread: &'static str, core: usize) -> Result<(), RtWarning> {
+pub(crate) fn pin_current(thread: &'static str, core: usize) -> Result<(), RtWarning> {
     let ok = core_affinity::get_core_ids()
         .and_then(|ids| ids.into_iter().find(|c| c.id == core))
         .is_some_and(core_affinity::set_for_current);
@@ -61,7 +61,7 @@ fn errno() -> i32 {
 
 /// Gives the calling thread SCHED_FIFO at `priority` (1–99).
 #[allow(unsafe_code)]
-pub fn fifo_current(thread: &'static str, priority: i32) -> Result<(), RtWarning> {
+pub(crate) fn fifo_current(thread: &'static str, priority: i32) -> Result<(), RtWarning> {
     let param = libc::sched_param { sched_priority: priority };
     // SAFETY: pthread_self() is the calling thread's valid handle and
     // `param` a valid sched_param that outlives the call.
@@ -71,7 +71,7 @@ pub fn fifo_current(thread: &'static str, priority: i32) -> Result<(), RtWarning
 
 /// Locks all current and future pages of the process in memory.
 #[allow(unsafe_code)]
-pub fn lock_memory() -> Result<(), RtWarning> {
+pub(crate) fn lock_memory() -> Result<(), RtWarning> {
     // SAFETY: mlockall takes flags only and touches no Rust-managed memory.
     let rc = unsafe { libc::mlockall(libc::MCL_CURRENT | libc::MCL_FUTURE) };
     if rc == 0 { Ok(()) } else { Err(RtWarning { thread: "process", what: RtRefused::Mlock { errno: errno() } }) }
@@ -79,7 +79,7 @@ pub fn lock_memory() -> Result<(), RtWarning> {
 
 /// Pins and prioritises the calling thread as configured; returns what was
 /// refused.
-pub fn setup_current(thread: &'static str, core: Option<usize>, priority: Option<i32>) -> Vec<RtWarning> {
+pub(crate) fn setup_current(thread: &'static str, core: Option<usize>, priority: Option<i32>) -> Vec<RtWarning> {
     let mut warnings = Vec::new();
     if let Some(c) = core
         && let Err(w) = pin_current(thread, c)

@@ -20,14 +20,14 @@ use topspin_core::rsi::session::SessionEvent;
 use topspin_core::time::Instant;
 
 /// Capacity of each thread's telemetry ring, events.
-pub const TELEMETRY_RING: usize = 8192;
+pub(crate) const TELEMETRY_RING: usize = 8192;
 /// Seconds between flushes of the sink (the session file: what is flushed
 /// survives a crash of the process).
-pub const FLUSH_INTERVAL_S: f64 = 1.0;
+pub(crate) const FLUSH_INTERVAL_S: f64 = 1.0;
 /// Bytes of each received datagram kept for the recording.
-pub const RECORDED_DATAGRAM: usize = 64;
+pub(crate) const RECORDED_DATAGRAM: usize = 64;
 /// Bytes of each RSI request and answer kept for the recording.
-pub const RECORDED_RSI: usize = 1024;
+pub(crate) const RECORDED_RSI: usize = 1024;
 
 /// One received tracker datagram.
 #[derive(Copy, Clone, Debug)]
@@ -87,13 +87,13 @@ pub enum Telemetry {
 }
 
 /// Capacity of the ring of RSI bytes (recording only), exchanges.
-pub const RSI_BYTES_RING: usize = 1024;
+pub(crate) const RSI_BYTES_RING: usize = 1024;
 /// Capacity of the ring of logo crops (live view / recording), crops.
-pub const LOGO_RING: usize = 64;
+pub(crate) const LOGO_RING: usize = 64;
 /// Largest logo crop side kept for the viewer, px (as `wire::crop::CROP_MAX_SIDE`).
-pub const LOGO_CROP_SIDE: usize = 96;
+pub(crate) const LOGO_CROP_SIDE: usize = 96;
 /// Seconds between queue-depth samples handed to the sink.
-pub const QUEUE_INTERVAL_S: f64 = 0.1;
+pub(crate) const QUEUE_INTERVAL_S: f64 = 0.1;
 
 /// One ball crop of the logo thread with what it found (for the viewer):
 /// fixed-size and `Copy`, pushed through its own ring like the RSI bytes.

@@ -13,10 +13,10 @@ use foxglove::{Context, PartialMetadata, RawChannel, WebSocketServer, WebSocketS
 use super::{TOPICS, Topic, ViewerError};
 
 /// Messages a client may fall behind before the SDK drops its oldest.
-pub const CLIENT_BACKLOG: usize = 1024;
+pub(crate) const CLIENT_BACKLOG: usize = 1024;
 
 /// The longest a stopping server waits for its clients' connections to close.
-pub const SHUTDOWN_WAIT: std::time::Duration = std::time::Duration::from_secs(1);
+pub(crate) const SHUTDOWN_WAIT: std::time::Duration = std::time::Duration::from_secs(1);
 
 /// A running live server and its channels.
 pub struct LiveServer {
@@ -80,7 +80,7 @@ impl LiveServer {
     }
 
     /// A client subscribes to `topic`.
-    pub fn wants(&self, topic: Topic) -> bool {
+    pub(crate) fn wants(&self, topic: Topic) -> bool {
         self.channels[topic as usize].has_sinks()
     }
 

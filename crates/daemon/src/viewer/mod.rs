@@ -51,26 +51,26 @@ pub use sink::{DemoTruth, ViewerSink};
 /// Where `--live` serves without an address (loopback, Foxglove's usual port).
 pub const DEFAULT_LIVE_ADDR: &str = "127.0.0.1:8765";
 /// Seconds between re-sends of the static cell scene and transform.
-pub const CELL_INTERVAL_S: f64 = 1.0;
+pub(crate) const CELL_INTERVAL_S: f64 = 1.0;
 /// How long an observation stays in the scene, s.
-pub const OBS_LIFETIME_S: f64 = 2.0;
+pub(crate) const OBS_LIFETIME_S: f64 = 2.0;
 /// One `/view/tcp` and TCP scene message every this many RSI cycles.
-pub const TCP_DECIMATION: u64 = 5;
+pub(crate) const TCP_DECIMATION: u64 = 5;
 /// Spacing of the predicted path's points, s.
-pub const PREDICTION_STEP_S: f64 = 0.01;
+pub(crate) const PREDICTION_STEP_S: f64 = 0.01;
 /// The longest predicted path, s.
-pub const PREDICTION_HORIZON_S: f64 = 1.5;
+pub(crate) const PREDICTION_HORIZON_S: f64 = 1.5;
 /// Spin arrow length per revolution per second, m.
-pub const SPIN_ARROW_M_PER_RPS: f64 = 0.004;
+pub(crate) const SPIN_ARROW_M_PER_RPS: f64 = 0.004;
 
 /// The parent frame: the table frame T.
-pub const FRAME_TABLE: &str = "table";
+pub(crate) const FRAME_TABLE: &str = "table";
 /// The robot base frame B.
-pub const FRAME_BASE: &str = "robot_base";
+pub(crate) const FRAME_BASE: &str = "robot_base";
 
 /// `/plot/spin`.
 #[derive(Copy, Clone, Debug, Serialize)]
-pub struct SpinPlot {
+pub(crate) struct SpinPlot {
     pub trajectory: u32,
     pub x_rps: f64,
     pub y_rps: f64,
@@ -80,7 +80,7 @@ pub struct SpinPlot {
 
 /// `/plot/prediction_error`.
 #[derive(Copy, Clone, Debug, Serialize)]
-pub struct PredictionErrorPlot {
+pub(crate) struct PredictionErrorPlot {
     pub trajectory: u32,
     pub seq: u32,
     pub time_to_hit_s: f64,
@@ -110,15 +110,15 @@ pub enum ViewerError {
 
 // Small geometry helpers (Foxglove's types from ours).
 
-pub(crate) fn v3(p: topspin_core::physics::Vec3) -> fm::Vector3 {
+pub fn v3(p: topspin_core::physics::Vec3) -> fm::Vector3 {
     fm::Vector3 { x: p.x, y: p.y, z: p.z }
 }
 
-pub(crate) fn p3(p: topspin_core::physics::Vec3) -> fm::Point3 {
+pub fn p3(p: topspin_core::physics::Vec3) -> fm::Point3 {
     fm::Point3 { x: p.x, y: p.y, z: p.z }
 }
 
-pub(crate) fn color(r: f64, g: f64, b: f64, a: f64) -> fm::Color {
+pub fn color(r: f64, g: f64, b: f64, a: f64) -> fm::Color {
     fm::Color { r, g, b, a }
 }
 
@@ -165,12 +165,12 @@ pub(crate) fn quat_x_to(d: topspin_core::physics::Vec3) -> fm::Quaternion {
 }
 
 /// A pose from a position and a rotation.
-pub(crate) fn pose(p: topspin_core::physics::Vec3, q: fm::Quaternion) -> fm::Pose {
+pub fn pose(p: topspin_core::physics::Vec3, q: fm::Quaternion) -> fm::Pose {
     fm::Pose { position: Some(v3(p)), orientation: Some(q) }
 }
 
 /// Foxglove's timestamp of `ns` since the Unix epoch.
-pub(crate) fn stamp(ns: u64) -> fm::Timestamp {
+pub fn stamp(ns: u64) -> fm::Timestamp {
     fm::Timestamp::new((ns / 1_000_000_000) as u32, (ns % 1_000_000_000) as u32)
 }
 

@@ -7,10 +7,10 @@
 
 use std::sync::atomic::{AtomicBool, Ordering};
 
-use topspin_core::estimator::{Estimator, EstimatorConfig};
-use topspin_core::ingest::Ingest;
 use crate::record::{RecordError, Session};
 use crate::runtime::telemetry::{QUEUE_INTERVAL_S, QueueDepths, RECORDED_RSI, RsiRecord, Telemetry, TelemetrySink};
+use topspin_core::estimator::{Estimator, EstimatorConfig};
+use topspin_core::ingest::Ingest;
 use topspin_core::time::Duration;
 
 /// Feeds `session` to `sink`; `speed`: recorded seconds per wall second

@@ -15,17 +15,17 @@ use super::{
     PREDICTION_STEP_S, PredictionErrorPlot, RsiPlot, SPIN_ARROW_M_PER_RPS, SpinPlot, TCP_DECIMATION, Topic, color, p3,
     pose, quat_x_to, quat_zyx, stamp, v3,
 };
+use crate::record::sink::RecordingSink;
+use crate::runtime::telemetry::{
+    DatagramRecord, LOGO_CROP_SIDE, LogoRecord, QueueDepths, RsiRecord, Telemetry, TelemetrySink,
+};
 use topspin_core::calib::Calibration;
 use topspin_core::estimator::EstimatorEvent;
 use topspin_core::physics::propagate::{Event, StopAt};
 use topspin_core::physics::{BallState, Propagator, Vec3, rad_to_rps};
 use topspin_core::plan::StrikePlan;
-use crate::record::sink::RecordingSink;
 use topspin_core::rsi::codec::{KukaPose, RobFrame, SenFrame};
 use topspin_core::rsi::session::SessionEvent;
-use crate::runtime::telemetry::{
-    DatagramRecord, LOGO_CROP_SIDE, LogoRecord, QueueDepths, RsiRecord, Telemetry, TelemetrySink,
-};
 use topspin_core::time::{Duration, Instant};
 
 /// Ball radius drawn, m.

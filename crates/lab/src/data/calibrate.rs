@@ -110,7 +110,7 @@ pub enum Objective {
 }
 
 /// The error charged for a missing prediction, mm.
-pub const MISSING_PENALTY_MM: f64 = 1000.0;
+pub(crate) const MISSING_PENALTY_MM: f64 = 1000.0;
 
 impl Objective {
     /// The objective's value for a report.
@@ -227,7 +227,7 @@ pub fn split_even_odd(trajs: &[PreparedTrajectory]) -> (Vec<PreparedTrajectory>,
 }
 
 /// The propagator `cfg` uses, rebuilt with `p`'s physics.
-pub fn with_physics(cfg: &EvalConfig, p: &PhysicsParams) -> EvalConfig {
+pub(crate) fn with_physics(cfg: &EvalConfig, p: &PhysicsParams) -> EvalConfig {
     let mut out = *cfg;
     let dt = cfg.propagator.dt;
     out.propagator = Propagator::new(p.flight_model(), p.bounce_model(), cfg.propagator.table);
@@ -308,7 +308,7 @@ where
 /// Nelder–Mead (reflection 1, expansion 2, contraction ½, shrink ½) from
 /// `x0` with the initial simplex x0 + steps_i e_i. Returns the best point
 /// and the number of evaluations. Deterministic.
-pub fn nelder_mead(
+pub(crate) fn nelder_mead(
     f: &dyn Fn(&[f64]) -> f64,
     x0: &[f64],
     steps: &[f64],

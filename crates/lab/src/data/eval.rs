@@ -56,7 +56,7 @@ impl Predictor for CubicBaseline {
 }
 
 /// Position and velocity at the last sample from a cubic per axis.
-pub fn cubic_state(samples: &[(f64, Vec3)]) -> Option<(Vec3, Vec3, f64)> {
+pub(crate) fn cubic_state(samples: &[(f64, Vec3)]) -> Option<(Vec3, Vec3, f64)> {
     let &(t_last, _) = samples.last()?;
     if samples.len() < 4 {
         return None;
@@ -122,9 +122,9 @@ pub struct EvalConfig {
 }
 
 /// The default horizon for (b), s.
-pub const HORIZON: f64 = 0.3;
+pub(crate) const HORIZON: f64 = 0.3;
 /// The default fewest pre-net samples.
-pub const MIN_PRE_NET_SAMPLES: usize = 10;
+pub(crate) const MIN_PRE_NET_SAMPLES: usize = 10;
 
 impl EvalConfig {
     pub fn new(propagator: Propagator) -> Self {
@@ -241,7 +241,7 @@ impl std::fmt::Display for Report {
 
 /// The recorded position at `t`, linearly interpolated between the samples
 /// around it; `None` outside the recording or across a gap.
-pub fn interpolate(s: &[(f64, Vec3)], t: f64, max_gap: f64) -> Option<Vec3> {
+pub(crate) fn interpolate(s: &[(f64, Vec3)], t: f64, max_gap: f64) -> Option<Vec3> {
     let k = s.partition_point(|(ts, _)| *ts < t);
     if k == 0 || k >= s.len() {
         return (k < s.len() && s[k].0 == t).then(|| s[k].1);
@@ -256,7 +256,7 @@ pub fn interpolate(s: &[(f64, Vec3)], t: f64, max_gap: f64) -> Option<Vec3> {
 }
 
 /// The first table contact of `pred` under `prop`.
-pub fn predicted_bounce(prop: &Propagator, pred: &Prediction, max_flight: f64) -> Option<(f64, Vec3)> {
+pub(crate) fn predicted_bounce(prop: &Propagator, pred: &Prediction, max_flight: f64) -> Option<(f64, Vec3)> {
     let mut s = pred.state;
     let mut t = pred.t;
     let stop = StopAt::time(pred.t + max_flight);
@@ -267,7 +267,7 @@ pub fn predicted_bounce(prop: &Propagator, pred: &Prediction, max_flight: f64) -
 }
 
 /// The position of `pred` at `t_end` under `prop`, through bounces.
-pub fn predicted_position(prop: &Propagator, pred: &Prediction, t_end: f64) -> Option<Vec3> {
+pub(crate) fn predicted_position(prop: &Propagator, pred: &Prediction, t_end: f64) -> Option<Vec3> {
     let mut s = pred.state;
     let mut t = pred.t;
     let stop = StopAt::time(t_end);
@@ -281,18 +281,9 @@ pub fn predicted_position(prop: &Propagator, pred: &Prediction, t_end: f64) -> O
     None
 }
 
-/// Evaluates `predictor` on one prepared trajectory.
-pub fn evaluate_one<P: Predictor + ?Sized>(
-    tr: &PreparedTrajectory,
-    predictor: &P,
-    cfg: &EvalConfig,
-) -> TrajectoryResult {
-    score_one(tr, predict_one(tr, predictor, cfg), cfg)
-}
-
 /// The predictor's output for one trajectory (`None` with too few pre-net
 /// samples, a declined or a non-finite prediction).
-pub fn predict_one<P: Predictor + ?Sized>(
+pub(crate) fn predict_one<P: Predictor + ?Sized>(
     tr: &PreparedTrajectory,
     predictor: &P,
     cfg: &EvalConfig,
@@ -304,7 +295,7 @@ pub fn predict_one<P: Predictor + ?Sized>(
 }
 
 /// Scores a prediction made from `tr`'s pre-net samples.
-pub fn score_one(tr: &PreparedTrajectory, prediction: Option<Prediction>, cfg: &EvalConfig) -> TrajectoryResult {
+pub(crate) fn score_one(tr: &PreparedTrajectory, prediction: Option<Prediction>, cfg: &EvalConfig) -> TrajectoryResult {
     let mut r = TrajectoryResult {
         set: tr.set.clone(),
         index: tr.index,
@@ -344,7 +335,7 @@ pub fn score_one(tr: &PreparedTrajectory, prediction: Option<Prediction>, cfg: &
 /// The predictor's output for every trajectory, in order, spread over the
 /// available cores (each trajectory is independent; the result does not
 /// depend on the thread count).
-pub fn predict_all<P: Predictor + Sync + ?Sized>(
+pub(crate) fn predict_all<P: Predictor + Sync + ?Sized>(
     trajs: &[PreparedTrajectory],
     predictor: &P,
     cfg: &EvalConfig,
@@ -392,7 +383,7 @@ pub fn evaluate<P: Predictor + Sync + ?Sized>(trajs: &[PreparedTrajectory], pred
 /// Scores predictions made earlier (`predictions[i]` from `trajs[i]`, as
 /// [`predict_all`] returns them) and summarises per set: one fit, several
 /// horizons.
-pub fn evaluate_predictions(
+pub(crate) fn evaluate_predictions(
     trajs: &[PreparedTrajectory],
     predictions: &[Option<Prediction>],
     cfg: &EvalConfig,

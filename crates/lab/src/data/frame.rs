@@ -109,7 +109,7 @@ pub struct BounceSearch {
 }
 
 /// The fewest samples on each side of a bounce for the two parabolas.
-pub const MIN_SIDE_SAMPLES: usize = 4;
+pub(crate) const MIN_SIDE_SAMPLES: usize = 4;
 
 impl BounceSearch {
     /// Search in the table frame (surface z = 0).
@@ -284,7 +284,7 @@ const HALF_LENGTH: f64 = 1.37;
 
 /// The lab-frame surface height assumed before it is estimated (the data
 /// README's 0.745 m).
-pub const NOMINAL_SURFACE_Z: f64 = 0.745;
+pub(crate) const NOMINAL_SURFACE_Z: f64 = 0.745;
 
 fn mad_spread(v: &[f64], centre: f64) -> f64 {
     let mut d: Vec<f64> = v.iter().map(|x| (x - centre).abs()).collect();

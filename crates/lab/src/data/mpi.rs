@@ -16,14 +16,14 @@ use topspin_core::physics::Vec3;
 pub const SETS: [&str; 4] = ["backspin", "topspin", "no_spin", "robot_no_spin"];
 
 /// Name of the per-set index file.
-pub const INDEX_FILE: &str = "index.csv";
+pub(crate) const INDEX_FILE: &str = "index.csv";
 
 /// Environment variable that points at the `mpi-launcher` folder.
 pub const DATA_ENV: &str = "TOPSPIN_MPI_DATA";
 
 /// Where the set lives relative to the repository root in CI (the repo is
 /// cloned with `shared/` beside it).
-pub const DATA_REL_PATH: &str = "../shared/data/mpi-launcher";
+pub(crate) const DATA_REL_PATH: &str = "../shared/data/mpi-launcher";
 
 /// One recorded launcher shot, positions in the lab frame.
 #[derive(Clone, Debug, PartialEq)]
@@ -86,7 +86,7 @@ pub fn locate(repo_root: &Path) -> Option<PathBuf> {
 
 /// One row of `index.csv`.
 #[derive(Clone, Debug, PartialEq)]
-pub struct IndexEntry {
+pub(crate) struct IndexEntry {
     pub set: String,
     pub index: usize,
     pub launcher: [f64; 5],
@@ -120,7 +120,7 @@ fn reader(path: &Path) -> Result<csv::Reader<std::fs::File>, MpiError> {
 }
 
 /// Reads `index.csv`.
-pub fn read_index(path: &Path) -> Result<Vec<IndexEntry>, MpiError> {
+pub(crate) fn read_index(path: &Path) -> Result<Vec<IndexEntry>, MpiError> {
     let mut rdr = reader(path)?;
     let headers = rdr.headers().map_err(csv_err(path))?.clone();
     let c_set = column(&headers, "set", path)?;
@@ -190,7 +190,7 @@ pub fn read_samples(path: &Path) -> Result<Vec<(f64, Vec3)>, MpiError> {
 }
 
 /// The fewest samples a file must hold to be loaded at all.
-pub const MIN_FILE_SAMPLES: usize = 8;
+pub(crate) const MIN_FILE_SAMPLES: usize = 8;
 
 /// Loads every trajectory listed in `dir/index.csv`, in index order.
 pub fn load(dir: &Path) -> Result<Vec<RealTrajectory>, MpiError> {

@@ -5,7 +5,7 @@
 /// returns `c` with value ≈ Σ c_k τ^k. The caller centres τ; internally τ is
 /// scaled to [−1, 1] so the normal equations stay well conditioned. `None`
 /// with fewer than `N` points or a singular system (e.g. repeated τ).
-pub fn polyfit<const N: usize>(pts: &[(f64, f64)]) -> Option<[f64; N]> {
+pub(crate) fn polyfit<const N: usize>(pts: &[(f64, f64)]) -> Option<[f64; N]> {
     if pts.len() < N || N == 0 {
         return None;
     }
@@ -73,7 +73,7 @@ pub fn eval<const N: usize>(c: &[f64; N], tau: f64) -> f64 {
 }
 
 /// d/dτ Σ c_k τ^k.
-pub fn eval_deriv<const N: usize>(c: &[f64; N], tau: f64) -> f64 {
+pub(crate) fn eval_deriv<const N: usize>(c: &[f64; N], tau: f64) -> f64 {
     (1..N).rev().fold(0.0, |acc, k| acc * tau + k as f64 * c[k])
 }
 

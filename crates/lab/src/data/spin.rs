@@ -22,7 +22,7 @@ use super::eval::{Prediction, Predictor};
 
 /// Per-axis tracker noise assumed for the MPI set, m: the measured RMS is
 /// 0.5–2.7 mm per axis (docs/real-data.md), x the noisiest.
-pub const REAL_NOISE: f64 = 0.002;
+pub(crate) const REAL_NOISE: f64 = 0.002;
 
 /// The hitting plane handed to the fit (it only affects the fit's own
 /// prediction, which the evaluation does not use), m.

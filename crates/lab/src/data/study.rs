@@ -19,15 +19,15 @@ use super::spin::{FitPredictor, SpinFit};
 
 /// The horizons reported, s: the 0.3 s, and 0.2 s, which every
 /// trajectory reaches (14 of 15 topspin files end before t_last + 0.3 s).
-pub const HORIZONS: [f64; 2] = [0.3, 0.2];
+pub(crate) const HORIZONS: [f64; 2] = [0.3, 0.2];
 
 /// The horizon of the calibration objective, s: 0.2 s, so that all four
 /// sets (topspin included) enter it.
-pub const CALIB_HORIZON: f64 = 0.2;
+pub(crate) const CALIB_HORIZON: f64 = 0.2;
 
 /// The objective the calibration minimises: per set, median bounce error +
 /// median error 0.2 s ahead, averaged over the four sets.
-pub const CALIB_OBJECTIVE: Objective = Objective::SetMedianSum;
+pub(crate) const CALIB_OBJECTIVE: Objective = Objective::SetMedianSum;
 
 /// Evaluation settings for `p`'s physics at `horizon`.
 pub fn eval_config(p: &PhysicsParams, horizon: f64) -> EvalConfig {
@@ -53,7 +53,7 @@ impl Which {
     }
 
     /// True when the predictor estimates spin.
-    pub fn with_spin(self) -> bool {
+    pub(crate) fn with_spin(self) -> bool {
         matches!(self, Which::Fit(SpinFit::Paper | SpinFit::Refined))
     }
 
@@ -209,7 +209,7 @@ pub enum LiftChoice {
 /// The ranges the calibration may explore: the literature's for C_D
 /// (≈ 0.35–0.55 for a table-tennis ball), e (0.85–0.97) and μ (0.1–0.4);
 /// wide ones for the lift parameters, which have no such consensus.
-pub const PLAUSIBLE: [(CalibParam, (f64, f64)); 5] = [
+pub(crate) const PLAUSIBLE: [(CalibParam, (f64, f64)); 5] = [
     (CalibParam::DragCoefficient, (0.35, 0.55)),
     (CalibParam::Restitution, (0.85, 0.97)),
     (CalibParam::Friction, (0.1, 0.4)),
@@ -220,7 +220,7 @@ pub const PLAUSIBLE: [(CalibParam, (f64, f64)); 5] = [
 /// The search of one lift model on the even-indexed files of every set with
 /// the refined spin fit, validated on the odd ones. Starts from `base`
 /// (C_D, e, μ) with the lift model's own start values.
-pub fn calibration_setup(base: &PhysicsParams, lift: LiftChoice, max_evals: usize) -> CalibrationSetup {
+pub(crate) fn calibration_setup(base: &PhysicsParams, lift: LiftChoice, max_evals: usize) -> CalibrationSetup {
     let mut start = base.clone();
     let mut params =
         vec![CalibParam::DragCoefficient, CalibParam::LiftCm, CalibParam::Restitution, CalibParam::Friction];

@@ -6,11 +6,11 @@
 
 use serde::Serialize;
 
-use topspin_sim::simulate_set;
-use topspin_core::stats::Summary;
 use topspin_core::calib::Calibration;
 use topspin_core::fit::{FitConfig, Method, Sample, fit_trajectory};
 use topspin_core::physics::Vec3;
+use topspin_core::stats::Summary;
+use topspin_sim::simulate_set;
 use topspin_sim::{SimBall, TrackerModel};
 
 /// Which observations the fit sees.
@@ -68,7 +68,7 @@ fn v3(a: [f64; 3]) -> Vec3 {
 }
 
 /// The observations of `ball` inside `window` (its times are from launch).
-pub fn windowed(ball: &SimBall, window: Window) -> Vec<Sample> {
+pub(crate) fn windowed(ball: &SimBall, window: Window) -> Vec<Sample> {
     let end = match window {
         Window::PreBounce => ball.truth.bounce.as_ref().map_or(f64::INFINITY, |b| b.t),
         Window::PreNet => ball.truth.net_crossing_t.unwrap_or(f64::INFINITY),

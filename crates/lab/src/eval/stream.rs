@@ -5,14 +5,14 @@
 
 use serde::Serialize;
 
-use topspin_core::stats::Summary;
 use topspin_core::calib::Calibration;
 use topspin_core::estimator::{Estimator, EstimatorConfig, SpinSource};
 use topspin_core::fit::{FitConfig, Method, Sample, fit_trajectory};
 use topspin_core::physics::Vec3;
 use topspin_core::plan::StrikePlan;
-use topspin_sim::{Setting, SimBall, TrackerModel, schedule, simulate_ball};
+use topspin_core::stats::Summary;
 use topspin_core::time::Instant;
+use topspin_sim::{Setting, SimBall, TrackerModel, schedule, simulate_ball};
 
 /// How the stream is made.
 #[derive(Copy, Clone, Debug, PartialEq, Serialize)]
@@ -81,7 +81,7 @@ pub fn simulate_stream(cal: &Calibration, setup: &StreamSetup) -> (Vec<SimBall>,
 }
 
 /// Every plan the estimator made, with the ball it was made during.
-pub fn run_estimator(
+pub(crate) fn run_estimator(
     cal: &Calibration,
     cfg: EstimatorConfig,
     balls: &[SimBall],
@@ -129,7 +129,7 @@ fn row(lead_s: f64, source: &str, errs: Vec<Option<(f64, f64)>>) -> LeadRow {
 }
 
 /// Lead times of the table, s before the true hit.
-pub const LEADS: [f64; 6] = [0.5, 0.4, 0.3, 0.2, 0.15, 0.1];
+pub(crate) const LEADS: [f64; 6] = [0.5, 0.4, 0.3, 0.2, 0.15, 0.1];
 
 /// Runs the evaluation: EKF (spin as state), EKF with the window fit's
 /// spin, and the batch fits (paper, refined).

@@ -12,18 +12,18 @@
 use rayon::prelude::*;
 use serde::Serialize;
 
+use crate::eval::fit::{Window, windowed};
+use crate::logo::eval::MIN_FRAMES;
 use topspin_core::calib::Calibration;
 use topspin_core::calib::camera::CameraCalib;
-use crate::eval::fit::{Window, windowed};
-use topspin_core::stats::Summary;
 use topspin_core::fit::{FitConfig, Method as FitMethod, fit_trajectory};
 use topspin_core::logo::cnn::{self, LogoCnn};
 use topspin_core::logo::detect::DetectorConfig;
-use crate::logo::eval::MIN_FRAMES;
 use topspin_core::logo::fusion::{Fused, SpinEstimate, fuse};
 use topspin_core::logo::pipeline::{CropInput, LogoMethod, process_sequence};
 use topspin_core::logo::rotation::{RotationFit, RotationFitConfig};
 use topspin_core::physics::{Vec3, rad_to_rps};
+use topspin_core::stats::Summary;
 use topspin_sim::render::{BallColour, Scene, Sequence, SequenceOptions, render_sequence};
 use topspin_sim::{Setting, SimBall, TrackerModel, simulate_ball};
 
@@ -57,7 +57,7 @@ pub struct CompareBall {
 
 impl CompareBall {
     /// |ω̂ − ω| in rps per source.
-    pub fn errors_rps(&self) -> [Option<f64>; 5] {
+    pub(crate) fn errors_rps(&self) -> [Option<f64>; 5] {
         let t = Vec3::from(self.spin_true);
         self.spin.map(|s| s.map(|s| rad_to_rps((Vec3::from(s) - t).norm())))
     }
@@ -95,7 +95,7 @@ fn background(cam: &CameraCalib, seq: &Sequence, cfg: &RotationFitConfig) -> Opt
 }
 
 /// The CNN's rotation fit over a rendered sequence (camera frame → table).
-pub fn cnn_fit(
+pub(crate) fn cnn_fit(
     net: &mut LogoCnn,
     cam: &CameraCalib,
     seq: &Sequence,

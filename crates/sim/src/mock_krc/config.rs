@@ -35,7 +35,7 @@ pub struct EthernetConfig {
 }
 
 impl EthernetConfig {
-    pub fn sensor_addr(&self) -> SocketAddr {
+    pub(crate) fn sensor_addr(&self) -> SocketAddr {
         SocketAddr::new(self.ip, self.port)
     }
 

@@ -183,7 +183,7 @@ impl MockController {
     /// Closes the cycle at its deadline: counts a missing answer as late,
     /// applies the correction, moves the robot one cycle and advances IPOC.
     /// Returns the path sample at the start of the next cycle.
-    pub fn end_cycle(&mut self, next_t: Instant) -> PathSample {
+    pub(crate) fn end_cycle(&mut self, next_t: Instant) -> PathSample {
         let on_time = self.answered.is_some();
         match self.answered.take() {
             Some(k) => match self.cfg.mode {

@@ -9,17 +9,17 @@ use std::net::{SocketAddr, UdpSocket};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use topspin_daemon::clock;
 use topspin_core::time::{Duration, Instant};
+use topspin_daemon::clock;
 
 /// Largest datagram the link carries.
-pub const MAX_DATAGRAM: usize = 2048;
+pub(crate) const MAX_DATAGRAM: usize = 2048;
 /// Below this much time to the deadline the receive spins instead of
 /// sleeping.
-pub const SPIN_WINDOW: Duration = Duration::from_micros(300);
+pub(crate) const SPIN_WINDOW: Duration = Duration::from_micros(300);
 
 /// Sends requests, receives answers with a deadline.
-pub trait Link {
+pub(crate) trait Link {
     fn send(&mut self, bytes: &[u8]) -> io::Result<()>;
     /// One answer received before `deadline`, or `None`.
     fn recv_until(&mut self, deadline: Instant, buf: &mut [u8]) -> io::Result<Option<usize>>;
@@ -27,7 +27,7 @@ pub trait Link {
 
 /// The real thing: UDP to the sensor's address.
 #[derive(Debug)]
-pub struct UdpLink {
+pub(crate) struct UdpLink {
     socket: UdpSocket,
     peer: SocketAddr,
 }
@@ -121,7 +121,7 @@ impl Faults {
 
 /// Wraps a link and mistreats the answers it receives.
 #[derive(Debug)]
-pub struct FaultInjector<L> {
+pub(crate) struct FaultInjector<L> {
     inner: L,
     faults: Faults,
     rng: ChaCha8Rng,

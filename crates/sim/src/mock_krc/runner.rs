@@ -14,8 +14,8 @@ use super::config::{ContextConfig, EthernetConfig, RsiFileError};
 use super::controller::{ControllerConfig, CorrMode, MockController, PathSample, StopReason, Verdict};
 use super::faults::{FaultInjector, Faults, Link, MAX_DATAGRAM, UdpLink};
 use topspin_core::calib::RobotFile;
-use topspin_daemon::clock::{self, SPIN_BEFORE_DEADLINE};
 use topspin_core::time::{Duration, Instant};
+use topspin_daemon::clock::{self, SPIN_BEFORE_DEADLINE};
 
 /// How the mock runs.
 #[derive(Clone, Debug, PartialEq)]

@@ -12,16 +12,16 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use super::{PaperConfig, Progress, ball_index};
-use topspin_core::calib::Calibration;
 use crate::data::eval::{Prediction, Predictor, predicted_bounce};
 use crate::data::spin::FitPredictor;
+use topspin_core::calib::Calibration;
 use topspin_core::estimator::ekf::{Ekf, EkfNoise};
-use topspin_core::stats::Summary;
 use topspin_core::physics::{BallState, Propagator, Vec3};
+use topspin_core::stats::Summary;
 use topspin_sim::{Setting, SimBall, simulate_ball};
 
 /// The paper's Table III: (with fitted spin: mean, std; without: mean, std), mm.
-pub const PAPER_TABLE_III: [[f64; 4]; 9] = [
+pub(crate) const PAPER_TABLE_III: [[f64; 4]; 9] = [
     [10.28, 5.09, 36.78, 6.57],
     [27.02, 11.22, 125.76, 17.08],
     [43.37, 32.14, 170.75, 25.15],
@@ -37,7 +37,7 @@ pub const PAPER_TABLE_III: [[f64; 4]; 9] = [
 pub const PREDICTORS: [&str; 4] = ["paper fit", "refined fit", "Kalman, no spin", "refined, spin 0"];
 
 /// Samples used to start the Kalman filter (a line per axis).
-pub const KF_START: usize = 5;
+pub(crate) const KF_START: usize = 5;
 
 /// White acceleration noise of the spin-free Kalman filter, (m/s²)²·s: it
 /// must absorb the Magnus force its model lacks (up to ~20 m/s²). Swept
@@ -45,13 +45,13 @@ pub const KF_START: usize = 5;
 /// and the real recordings: 10 is near the best on both (median bounce
 /// error 131 mm simulated, 20 mm real); 0.005 lets the gate reject the
 /// track and drift (385 mm).
-pub const KF_ACCEL_NOISE: f64 = 10.0;
+pub(crate) const KF_ACCEL_NOISE: f64 = 10.0;
 
 /// A Kalman filter on position and velocity only (the paper's comparison):
 /// started from a straight line through the first [`KF_START`] samples,
 /// then one predict/update per sample; the spin stays zero.
 #[derive(Copy, Clone, Debug)]
-pub struct KalmanNoSpin {
+pub(crate) struct KalmanNoSpin {
     pub propagator: Propagator,
     /// Per-axis measurement σ, m.
     pub noise: f64,
@@ -118,13 +118,13 @@ pub struct BounceTable {
 }
 
 /// The observations before the true net crossing, as (t, position).
-pub fn pre_net(ball: &SimBall) -> Vec<(f64, Vec3)> {
+pub(crate) fn pre_net(ball: &SimBall) -> Vec<(f64, Vec3)> {
     let end = ball.truth.net_crossing_t.unwrap_or(f64::INFINITY);
     ball.observations.iter().filter(|o| o.t < end && !o.outlier).map(|o| (o.t, o.pos)).collect()
 }
 
 /// The four predictors under `cal`'s physics at tracker noise `noise` (m).
-pub fn predictors(cal: &Calibration, noise: f64) -> [Box<dyn Predictor + Sync>; 4] {
+pub(crate) fn predictors(cal: &Calibration, noise: f64) -> [Box<dyn Predictor + Sync>; 4] {
     let p = &cal.physics;
     [
         Box::new(FitPredictor::paper(p).with_noise(noise)),

@@ -8,13 +8,13 @@
 use serde::Serialize;
 
 use super::flights::{Estimate, Flight, SpinMethod};
-use topspin_core::stats::quantile_sorted;
 use topspin_core::physics::Vec3;
+use topspin_core::stats::quantile_sorted;
 use topspin_sim::Setting;
 
 /// The paper's Table IV per setting (paper order) and in total, percent:
 /// background subtraction, + segment fit, CNN, trajectory fitting.
-pub const PAPER_TABLE_IV: [[f64; 10]; 4] = [
+pub(crate) const PAPER_TABLE_IV: [[f64; 10]; 4] = [
     [88.0, 84.0, 70.0, 94.0, 68.0, 60.0, 84.0, 78.0, 90.0, 79.6],
     [94.0, 92.0, 86.0, 98.0, 58.0, 68.0, 90.0, 86.0, 96.0, 85.3],
     [96.0, 94.0, 80.0, 98.0, 74.0, 66.0, 88.0, 88.0, 96.0, 86.7],
@@ -22,7 +22,7 @@ pub const PAPER_TABLE_IV: [[f64; 10]; 4] = [
 ];
 
 /// The paper's column for a method, if the paper has one.
-pub fn paper_column(m: SpinMethod) -> Option<&'static [f64; 10]> {
+pub(crate) fn paper_column(m: SpinMethod) -> Option<&'static [f64; 10]> {
     match m {
         SpinMethod::BgCentroid => Some(&PAPER_TABLE_IV[0]),
         SpinMethod::BgSegment => Some(&PAPER_TABLE_IV[1]),
@@ -54,7 +54,7 @@ pub struct MethodClasses {
 }
 
 /// The component-wise median of `v`.
-pub fn median_vec(v: &[Vec3]) -> Option<Vec3> {
+pub(crate) fn median_vec(v: &[Vec3]) -> Option<Vec3> {
     if v.is_empty() {
         return None;
     }

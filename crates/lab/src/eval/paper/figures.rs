@@ -26,7 +26,7 @@ type Area<'a> = DrawingArea<SVGBackend<'a>, Shift>;
 
 /// One plotted series.
 #[derive(Clone, Debug)]
-pub struct Series {
+pub(crate) struct Series {
     pub label: String,
     pub colour: RGBColor,
     pub points: Vec<(f64, f64)>,
@@ -38,7 +38,7 @@ impl Series {
     pub fn line(label: &str, colour: RGBColor, points: Vec<(f64, f64)>) -> Self {
         Series { label: label.to_owned(), colour, points, markers: false }
     }
-    pub fn markers(label: &str, colour: RGBColor, points: Vec<(f64, f64)>) -> Self {
+    pub(crate) fn markers(label: &str, colour: RGBColor, points: Vec<(f64, f64)>) -> Self {
         Series { label: label.to_owned(), colour, points, markers: true }
     }
 }
@@ -120,7 +120,7 @@ fn pre_bounce(ball: &SimBall) -> Vec<Sample> {
 
 /// Paper Fig. 6: z of the observations before the bounce with the cubic,
 /// and the z-velocity between neighbouring points against P′_z.
-pub fn two_point_velocity(ball: &SimBall, noise_mm: f64) -> anyhow::Result<String> {
+pub(crate) fn two_point_velocity(ball: &SimBall, noise_mm: f64) -> anyhow::Result<String> {
     let s = pre_bounce(ball);
     let cubic = Cubic::fit(s.iter()).ok_or_else(|| anyhow::anyhow!("no cubic"))?;
     let z: Vec<(f64, f64)> = s.iter().map(|p| (p.t, p.pos.z)).collect();
@@ -149,7 +149,7 @@ pub fn two_point_velocity(ball: &SimBall, noise_mm: f64) -> anyhow::Result<Strin
 
 /// Paper Fig. 7: |gravity|, |drag| and |Magnus| acceleration along a
 /// flight, from the paper's fit (cubic + Magnus solve) and the truth.
-pub fn accelerations(ball: &SimBall, prop: &Propagator, noise: f64) -> anyhow::Result<String> {
+pub(crate) fn accelerations(ball: &SimBall, prop: &Propagator, noise: f64) -> anyhow::Result<String> {
     let s = pre_bounce(ball);
     let fm: &FlightModel = &prop.flight;
     let cubic = Cubic::fit(s.iter()).ok_or_else(|| anyhow::anyhow!("no cubic"))?;
@@ -187,7 +187,7 @@ pub fn accelerations(ball: &SimBall, prop: &Propagator, noise: f64) -> anyhow::R
 
 /// Paper Fig. 5: logo positions (camera frame, time order) and the circle
 /// of the fitted rotation plane on the unit sphere.
-pub fn logo_plane(title: &str, positions: &[Vec3], fit: &RotationFit) -> anyhow::Result<String> {
+pub(crate) fn logo_plane(title: &str, positions: &[Vec3], fit: &RotationFit) -> anyhow::Result<String> {
     let n = fit.axis.normalize();
     let d = fit.plane_offset;
     let rho = (1.0 - d * d).max(0.0).sqrt();
@@ -288,7 +288,7 @@ pub fn predicted(cases: &[PredictedCase]) -> anyhow::Result<String> {
 }
 
 /// The spins of each method, ω_y against ω_z in rps, one colour per setting.
-pub fn clusters(flights: &[Flight], methods: &[SpinMethod]) -> anyhow::Result<String> {
+pub(crate) fn clusters(flights: &[Flight], methods: &[SpinMethod]) -> anyhow::Result<String> {
     let cols = 3usize;
     let rows_n = methods.len().div_ceil(cols).max(1);
     svg((1200, 380 * rows_n as u32), |root| {

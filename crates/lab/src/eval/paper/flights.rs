@@ -23,12 +23,12 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use super::{Clock, PaperConfig, Progress, ball_index};
+use crate::logo::eval::MIN_FRAMES;
 use topspin_core::calib::Calibration;
 use topspin_core::calib::camera::CameraCalib;
 use topspin_core::fit::{FitConfig, Method, Sample, TrajectoryFit, fit_trajectory};
 use topspin_core::logo::cnn::{geodesic_deg, swing_to};
 use topspin_core::logo::detect::{BallReference, CropImage, DetectorConfig, LogoMeasurement, detect};
-use crate::logo::eval::MIN_FRAMES;
 use topspin_core::logo::pipeline::LogoMethod;
 use topspin_core::logo::rotation::{LogoSample, RotationFit, RotationFitConfig, fit_rotation};
 use topspin_core::logo::view::BallView;
@@ -85,7 +85,7 @@ impl SpinMethod {
     }
 
     /// The background-subtraction variant behind a logo method.
-    pub fn bg_variant(self) -> Option<LogoMethod> {
+    pub(crate) fn bg_variant(self) -> Option<LogoMethod> {
         match self {
             SpinMethod::BgCentroid => Some(LogoMethod::Centroid),
             SpinMethod::BgSegment => Some(LogoMethod::Segment),
@@ -225,14 +225,14 @@ pub struct FlightSet {
 }
 
 /// The observations before the true net crossing.
-pub fn pre_net_samples(ball: &SimBall) -> Vec<Sample> {
+pub(crate) fn pre_net_samples(ball: &SimBall) -> Vec<Sample> {
     let end = ball.truth.net_crossing_t.unwrap_or(f64::INFINITY);
     ball.observations.iter().filter(|o| o.t < end).map(|o| Sample::new(o.t, o.pos)).collect()
 }
 
 /// The background method over a sequence: per frame the measurement (or
 /// none), with the seconds spent (reference + detection) on `clock`.
-pub fn bg_measurements(
+pub(crate) fn bg_measurements(
     cam: &CameraCalib,
     seq: &Sequence,
     clock: Clock<'_>,
@@ -253,7 +253,7 @@ pub fn bg_measurements(
 }
 
 /// Logo samples of a variant (camera frame).
-pub fn logo_samples(seq: &Sequence, ms: &[Option<LogoMeasurement>], variant: LogoMethod) -> Vec<LogoSample> {
+pub(crate) fn logo_samples(seq: &Sequence, ms: &[Option<LogoMeasurement>], variant: LogoMethod) -> Vec<LogoSample> {
     seq.frames
         .iter()
         .zip(ms)
@@ -441,7 +441,7 @@ pub fn run_cnn(
 }
 
 /// Runs `fusion` over every flight and fills the fused estimate.
-pub fn run_fusion(set: &mut FlightSet, fusion: &mut dyn SpinFusion) {
+pub(crate) fn run_fusion(set: &mut FlightSet, fusion: &mut dyn SpinFusion) {
     set.fusion_name = Some(fusion.name());
     for (flight, fits) in set.flights.iter_mut().zip(&set.fits) {
         let spin = fusion.fuse(&FusionInput { flight, fits });

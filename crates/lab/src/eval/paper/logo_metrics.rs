@@ -12,7 +12,7 @@ use topspin_core::stats::Summary;
 
 /// The paper's numbers per method: (classification accuracy, geodesic
 /// deg, vector angle deg, ms per crop); NaN where the paper has none.
-pub fn paper_numbers(m: SpinMethod) -> Option<[f64; 4]> {
+pub(crate) fn paper_numbers(m: SpinMethod) -> Option<[f64; 4]> {
     match m {
         SpinMethod::BgCentroid => Some([f64::NAN, f64::NAN, 5.77, 0.3]),
         SpinMethod::BgSegment => Some([f64::NAN, f64::NAN, 5.06, 0.3]),
@@ -22,7 +22,7 @@ pub fn paper_numbers(m: SpinMethod) -> Option<[f64; 4]> {
 }
 
 /// The logo methods of the table.
-pub const LOGO_METHODS: [SpinMethod; 4] =
+pub(crate) const LOGO_METHODS: [SpinMethod; 4] =
     [SpinMethod::BgCentroid, SpinMethod::BgSegment, SpinMethod::BgWeighted, SpinMethod::Cnn];
 
 /// One row.

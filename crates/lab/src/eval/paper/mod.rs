@@ -101,26 +101,21 @@ pub type Clock<'a> = &'a (dyn Fn() -> f64 + Sync);
 
 /// Ball index `j` of setting `i` in a run: unique across settings, so
 /// that every setting draws its own balls from one seed.
-pub fn ball_index(setting: usize, j: usize) -> usize {
+pub(crate) fn ball_index(setting: usize, j: usize) -> usize {
     setting + Setting::ALL.len() * j
 }
 
-/// The setting's name as the tables print it (`backspin-low`).
-pub fn setting_name(s: &Setting) -> String {
-    s.to_string()
-}
-
-use topspin_core::calib::Calibration;
-use topspin_core::calib::camera::CameraCalib;
 use crate::data::eval::{Predictor, PreparedTrajectory, predicted_position};
 use crate::data::spin::FitPredictor;
+use flights::{CropPredictor, FlightSet, SpinFusion};
+use topspin_core::calib::Calibration;
+use topspin_core::calib::camera::CameraCalib;
 use topspin_core::logo::pipeline::LogoMethod;
 use topspin_core::logo::rotation::{RotationFitConfig, fit_rotation};
 use topspin_core::physics::Vec3;
 use topspin_sim::render::{BallColour, Scene, SequenceOptions, render_sequence};
 use topspin_sim::truth::true_position_at;
 use topspin_sim::{SimBall, simulate_ball};
-use flights::{CropPredictor, FlightSet, SpinFusion};
 
 /// The methods a run cannot provide itself: a crop predictor (the CNN)
 /// and a fusion of logo and trajectory. `None`: their rows say "no model".

@@ -23,7 +23,7 @@ pub const PREDICTORS: [(&str, bool); 5] = [
 
 /// The horizons, s: the 0.3 s and 0.2 s (14 of 15 topspin
 /// recordings end before 0.3 s).
-pub const HORIZONS: [f64; 2] = [0.3, 0.2];
+pub(crate) const HORIZONS: [f64; 2] = [0.3, 0.2];
 
 /// Errors of one predictor on one set, mm.
 #[derive(Clone, Debug, Serialize)]

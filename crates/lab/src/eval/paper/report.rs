@@ -75,7 +75,7 @@ fn mean_std(s: &Summary) -> String {
 }
 
 /// Table III as Markdown.
-pub fn bounce_markdown(t: &BounceTable, cfg: &PaperConfig) -> String {
+pub(crate) fn bounce_markdown(t: &BounceTable, cfg: &PaperConfig) -> String {
     let mut o = String::new();
     let _ = writeln!(
         o,
@@ -125,7 +125,7 @@ pub fn bounce_markdown(t: &BounceTable, cfg: &PaperConfig) -> String {
 }
 
 /// Table IV as Markdown.
-pub fn classes_markdown(
+pub(crate) fn classes_markdown(
     classes: &[MethodClasses],
     flights: &[Flight],
     tried: &[usize; 9],
@@ -196,7 +196,7 @@ pub fn classes_markdown(
 }
 
 /// The logo metrics as Markdown.
-pub fn logo_markdown(rows: &[LogoRow], machine: &str) -> String {
+pub(crate) fn logo_markdown(rows: &[LogoRow], machine: &str) -> String {
     let mut o = String::new();
     let _ = writeln!(
         o,
@@ -244,7 +244,7 @@ pub fn logo_markdown(rows: &[LogoRow], machine: &str) -> String {
 }
 
 /// The real-data table as Markdown.
-pub fn real_markdown(t: &RealTable) -> String {
+pub(crate) fn real_markdown(t: &RealTable) -> String {
     let mut o = String::new();
     let _ = writeln!(
         o,
@@ -283,7 +283,7 @@ pub fn real_markdown(t: &RealTable) -> String {
 }
 
 /// The latency run as Markdown.
-pub fn latency_markdown(l: &LatencyRun) -> String {
+pub(crate) fn latency_markdown(l: &LatencyRun) -> String {
     let mut o = String::new();
     let _ = writeln!(
         o,
