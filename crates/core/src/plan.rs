@@ -15,8 +15,11 @@ pub const HIT_WINDOW: Duration = Duration::from_millis(4);
 /// about z, then `b` about the new y, then `c` about the new x.
 #[derive(Copy, Clone, Debug, Default, PartialEq)]
 pub struct EulerZyx {
+    /// First rotation, about z, rad.
     pub a: f64,
+    /// Second rotation, about the new y, rad.
     pub b: f64,
+    /// Third rotation, about the new x, rad.
     pub c: f64,
 }
 

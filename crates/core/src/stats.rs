@@ -5,10 +5,15 @@ use serde::Serialize;
 /// Median, mean, standard deviation, 90th percentile and count.
 #[derive(Copy, Clone, Debug, Default, PartialEq, Serialize)]
 pub struct Summary {
+    /// Number of finite samples summarised (non-finite ones are dropped).
     pub n: usize,
+    /// Median (0.5-quantile), in the samples' unit.
     pub median: f64,
+    /// Arithmetic mean, in the samples' unit.
     pub mean: f64,
+    /// Sample standard deviation (divisor `n - 1`), in the samples' unit.
     pub std: f64,
+    /// 90th percentile (0.9-quantile), in the samples' unit.
     pub p90: f64,
 }
 
@@ -23,6 +28,8 @@ pub fn quantile_sorted(sorted: &[f64], q: f64) -> f64 {
 }
 
 impl Summary {
+    /// Summarises the finite values of `values`; all statistics are NaN
+    /// (and `n` is 0) when none are finite.
     pub fn of(values: &[f64]) -> Summary {
         let mut v: Vec<f64> = values.iter().copied().filter(|x| x.is_finite()).collect();
         if v.is_empty() {

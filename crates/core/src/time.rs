@@ -44,15 +44,19 @@ impl Instant {
 pub struct Duration(pub u64);
 
 impl Duration {
+    /// A span of `ns` nanoseconds.
     pub const fn from_nanos(ns: u64) -> Self {
         Duration(ns)
     }
+    /// A span of `us` microseconds.
     pub const fn from_micros(us: u64) -> Self {
         Duration(us * 1_000)
     }
+    /// A span of `ms` milliseconds.
     pub const fn from_millis(ms: u64) -> Self {
         Duration(ms * 1_000_000)
     }
+    /// The span in seconds.
     pub fn as_secs_f64(self) -> f64 {
         self.0 as f64 * 1e-9
     }

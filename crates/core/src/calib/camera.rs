@@ -22,8 +22,9 @@ pub(crate) const DEFAULT_CAMERA: &str = include_str!("../../../../calib/camera.t
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct CameraSection {
-    /// Sensor width and height, px.
+    /// Sensor width, px.
     pub width: u32,
+    /// Sensor height, px.
     pub height: u32,
     /// Pixel pitch, µm.
     pub pixel_pitch_um: f64,
@@ -66,7 +67,9 @@ pub(crate) struct CameraFile {
 /// The ceiling camera, loaded and validated.
 #[derive(Clone, Debug, PartialEq)]
 pub struct CameraCalib {
+    /// The `[camera]` section as loaded.
     pub camera: CameraSection,
+    /// The `[logo]` section as loaded.
     pub logo: LogoSection,
     /// Focal length in px (same in u and v: square pixels).
     pub f_px: f64,

@@ -58,9 +58,11 @@ pub struct StrikeCalib {
     pub beta_backspin_deg: f64,
     /// A (rotation about z) = a0 + a_per_y · y, degrees and degrees per m.
     pub a0_deg: f64,
+    /// Slope of A with the hitting point's y (table frame), degrees per m.
     pub a_per_y_deg: f64,
     /// C (rotation about x) = c0 + c_per_y · y, degrees and degrees per m.
     pub c0_deg: f64,
+    /// Slope of C with the hitting point's y (table frame), degrees per m.
     pub c_per_y_deg: f64,
 }
 
@@ -81,8 +83,11 @@ pub(crate) struct StrikeFile {
 /// Everything calibrated, loaded and validated.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Calibration {
+    /// Ball, air and contact constants (`calib/physics.toml`).
     pub physics: PhysicsParams,
+    /// Table geometry (`calib/table.toml`).
     pub table: Table,
+    /// Hitting plane, window and stroke (`calib/strike.toml`).
     pub strike: StrikeCalib,
     /// The robot cell (`calib/robot.toml`).
     pub robot: RobotFile,
@@ -91,14 +96,40 @@ pub struct Calibration {
 /// A calibration file that cannot be used.
 #[derive(Debug, thiserror::Error)]
 pub enum CalibError {
+    /// The file or folder cannot be read.
     #[error("cannot read {path}: {source}")]
-    Read { path: PathBuf, source: std::io::Error },
+    Read {
+        /// The file or folder.
+        path: PathBuf,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+    /// The file is not valid TOML of the expected shape.
     #[error("{path}: {message}")]
-    Parse { path: PathBuf, message: String },
+    Parse {
+        /// The file (`<default>/NAME` for a compiled-in default).
+        path: PathBuf,
+        /// The parser's message, with the byte offset where known.
+        message: String,
+    },
+    /// A physics constant is out of range.
     #[error("{path}: {source}")]
-    Invalid { path: PathBuf, source: crate::physics::params::InvalidParam },
+    Invalid {
+        /// The file.
+        path: PathBuf,
+        /// The offending constant.
+        source: crate::physics::params::InvalidParam,
+    },
+    /// A value is out of range or inconsistent with the rest of the cell.
     #[error("{path}: `{key}` = {value} is out of range")]
-    OutOfRange { path: PathBuf, key: &'static str, value: f64 },
+    OutOfRange {
+        /// The file.
+        path: PathBuf,
+        /// The offending key (`section.field`, possibly with a reason).
+        key: &'static str,
+        /// The offending value.
+        value: f64,
+    },
 }
 
 fn parse<T: for<'de> Deserialize<'de>>(text: &str, path: &Path) -> Result<T, CalibError> {

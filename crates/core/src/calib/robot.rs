@@ -16,13 +16,21 @@ use crate::physics::Vec3;
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct RobotFile {
+    /// Format version of the file.
     pub version: u32,
+    /// `[robot]`: the arm and its bat.
     pub robot: RobotModel,
+    /// `[cell]`: where the base stands in the table frame.
     pub cell: CellPlacement,
+    /// `[home]`: the home (RSI start) pose.
     pub home: HomePose,
+    /// `[workspace]`: the box the TCP never leaves.
     pub workspace: Workspace,
+    /// `[limits]`: Cartesian TCP limits.
     pub limits: TcpLimits,
+    /// `[poscorr]`: the controller's POSCORR limits.
     pub poscorr: PosCorrLimits,
+    /// `[rsi]`: RSI timing.
     pub rsi: RsiTiming,
 }
 
@@ -30,6 +38,7 @@ pub struct RobotFile {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct RobotModel {
+    /// Robot model name (informational, shown in the viewer).
     pub model: String,
     /// Datasheet reach (wrist centre), m.
     pub reach_m: f64,
@@ -45,7 +54,9 @@ pub struct RobotModel {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct CellPlacement {
+    /// Origin of the robot base B in the table frame T, m.
     pub base_in_table_xyz_m: [f64; 3],
+    /// Rotation of B about z_T, degrees.
     pub base_yaw_in_table_deg: f64,
 }
 
@@ -53,7 +64,9 @@ pub struct CellPlacement {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct HomePose {
+    /// TCP (bat centre) position in B, m.
     pub xyz_m: [f64; 3],
+    /// Orientation as KUKA A, B, C (rotations about Z, Y, X) in B, degrees.
     pub abc_deg: [f64; 3],
 }
 
@@ -61,8 +74,12 @@ pub struct HomePose {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Workspace {
+    /// Lower corner of the box in B, m.
     pub min_xyz_m: [f64; 3],
+    /// Upper corner of the box in B, m.
     pub max_xyz_m: [f64; 3],
+    /// Allowed deviation from the home orientation, ± per KUKA angle A, B,
+    /// C, degrees.
     pub abc_range_deg: [f64; 3],
 }
 
@@ -70,12 +87,20 @@ pub struct Workspace {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct TcpLimits {
+    /// Velocity limit per axis x, y, z, m/s.
     pub velocity_m_s: [f64; 3],
+    /// Acceleration limit per axis x, y, z, m/s².
     pub acceleration_m_s2: [f64; 3],
+    /// Jerk limit per axis x, y, z, m/s³.
     pub jerk_m_s3: [f64; 3],
+    /// Angular rate limit per KUKA angle A, B, C, °/s.
     pub rot_velocity_deg_s: [f64; 3],
+    /// Angular acceleration limit per KUKA angle A, B, C, °/s².
     pub rot_acceleration_deg_s2: [f64; 3],
+    /// Angular jerk limit per KUKA angle A, B, C, °/s³.
     pub rot_jerk_deg_s3: [f64; 3],
+    /// The fastest bat speed a plan may ask for at the hit (faster is
+    /// clamped), m/s.
     pub max_bat_speed_m_s: f64,
 }
 
@@ -83,10 +108,15 @@ pub struct TcpLimits {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct PosCorrLimits {
+    /// Lower POSCORR translation limit per axis x, y, z, mm.
     pub lower_xyz_mm: [f64; 3],
+    /// Upper POSCORR translation limit per axis x, y, z, mm.
     pub upper_xyz_mm: [f64; 3],
+    /// POSCORR rotation limit, degrees.
     pub max_rot_angle_deg: f64,
+    /// POSCORRMON: total (Euclidean) translation that stops the robot, mm.
     pub mon_max_trans_mm: f64,
+    /// POSCORRMON: total rotation that stops the robot, degrees.
     pub mon_max_rot_deg: f64,
 }
 
@@ -94,16 +124,26 @@ pub struct PosCorrLimits {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct RsiTiming {
+    /// Sensor cycle, ms: 4 (#IPO_FAST) or 12 (#IPO).
     pub cycle_ms: u32,
+    /// Delay from the request carrying a commanded pose until the robot
+    /// reaches it, ms.
     pub lead_ms: u32,
+    /// Late answers after which the controller stops RSI (its ETHERNET
+    /// timeout).
     pub late_limit: u32,
+    /// How long the stroke keeps the hit velocity after the hit before
+    /// returning home, s.
     pub follow_through_s: f64,
 }
 
 /// A value in `robot.toml` that cannot be used: its key and value.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct BadKey {
+    /// The key, as `section.field`.
     pub key: &'static str,
+    /// The bad value (for an array, the first bad element; for the reach
+    /// check, the corner's distance from the shoulder, m).
     pub value: f64,
 }
 

@@ -14,6 +14,8 @@ use nalgebra::{Matrix3, SMatrix, SVector};
 
 use crate::physics::{BallState, Event, Propagator, StopAt, Vec3};
 
+/// A 9×9 matrix over the filter state (position, velocity, spin), such as
+/// its covariance.
 pub type M9 = SMatrix<f64, 9, 9>;
 pub(crate) type V9 = SVector<f64, 9>;
 
@@ -48,17 +50,28 @@ impl Default for EkfNoise {
 #[derive(Copy, Clone, Debug, PartialEq)]
 pub enum Update {
     /// Accepted; the squared Mahalanobis distance.
-    Accepted { d2: f64 },
+    Accepted {
+        /// Squared Mahalanobis distance of the innovation.
+        d2: f64,
+    },
     /// Rejected by the gate.
-    Rejected { d2: f64 },
+    Rejected {
+        /// Squared Mahalanobis distance of the innovation.
+        d2: f64,
+    },
 }
 
 /// The filter: state, covariance and the time they hold at (s).
 #[derive(Copy, Clone, Debug, PartialEq)]
 pub struct Ekf {
+    /// Time the state and covariance hold at, s.
     pub t: f64,
+    /// State: position (m), velocity (m/s) and spin (rad/s) in the table
+    /// frame T, in that order.
     pub x: V9,
+    /// Covariance of `x`.
     pub p: M9,
+    /// Process and measurement noise.
     pub noise: EkfNoise,
     /// Bounces passed since initialisation.
     pub bounces: u32,
@@ -84,6 +97,7 @@ impl Ekf {
         Ekf { t, x: vec_of(state), p, noise, bounces: 0 }
     }
 
+    /// The state `x` as a ball state.
     pub fn state(&self) -> BallState {
         state_of(&self.x)
     }

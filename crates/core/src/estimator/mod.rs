@@ -56,8 +56,11 @@ pub struct EstimatorConfig {
     pub silence: f64,
     /// The smallest speed towards the robot that makes a candidate a track, m/s.
     pub min_approach_speed: f64,
+    /// Where the plan's spin comes from.
     pub spin_source: SpinSource,
+    /// The EKF's noise settings.
     pub noise: EkfNoise,
+    /// The paper's start filter applied to a candidate's observations.
     pub start_filter: StartFilter,
     /// Initial spin uncertainty of a new track, rad/s.
     pub initial_spin_std: f64,
@@ -92,11 +95,18 @@ impl EstimatorConfig {
 /// Why a track ended.
 #[derive(Copy, Clone, Debug, PartialEq, Eq)]
 pub enum EndReason {
+    /// No observation for longer than [`EstimatorConfig::silence`].
     Silence,
+    /// The ball bounced a second time.
     SecondBounce,
+    /// The ball is more than 0.3 m beyond the hitting plane.
     PassedRobot,
+    /// The ball flies back towards the opponent (v_x < −0.5 m/s).
     Returned,
+    /// The ball's speed fell below 0.3 m/s.
     Stopped,
+    /// The ball left the tracking volume (z < −0.3 m, |y| > 2.5 m or
+    /// x < −3 m in the table frame).
     LeftVolume,
     /// The gate rejected the ball's observations repeatedly.
     Lost,
@@ -105,40 +115,65 @@ pub enum EndReason {
 /// Something the telemetry may log.
 #[derive(Copy, Clone, Debug, PartialEq)]
 pub enum EstimatorEvent {
+    /// A candidate became a track.
     Started {
+        /// Id of the new track.
         trajectory: u32,
+        /// Time of the candidate's last observation, s.
         t: f64,
+        /// Candidate observations the start filter removed.
         start_outliers: u8,
     },
+    /// A track ended.
     Ended {
+        /// Id of the track.
         trajectory: u32,
+        /// Time the track ended, s.
         t: f64,
+        /// Why it ended.
         reason: EndReason,
     },
     /// A candidate that did not move towards the robot.
     Discarded {
+        /// Time of the candidate's last inlier, s.
         t: f64,
     },
+    /// The gate rejected an observation of the track.
     Rejected {
+        /// Id of the track.
         trajectory: u32,
+        /// Time of the rejected observation, s.
         t: f64,
+        /// Squared Mahalanobis distance of the observation.
         d2: f64,
     },
+    /// The track's ball bounced (confirmed by an accepted observation after
+    /// it).
     Bounce {
+        /// Id of the track.
         trajectory: u32,
+        /// Time of the bounce, s.
         t: f64,
     },
+    /// A prediction produced no plan.
     Withheld {
+        /// Id of the track.
         trajectory: u32,
+        /// Time of the prediction, s.
         t: f64,
+        /// Why no plan was published.
         reason: Withheld,
     },
     /// A spin from the logo thread, fused into the track (`accepted`) or
     /// refused by the gate; `d2` its squared Mahalanobis distance.
     LogoSpin {
+        /// Id of the track.
         trajectory: u32,
+        /// Time of the track's last observation, s.
         t: f64,
+        /// True when the spin was fused, false when the gate refused it.
         accepted: bool,
+        /// Squared Mahalanobis distance of the logo spin.
         d2: f64,
     },
 }
@@ -157,6 +192,7 @@ pub struct LogoSpin {
 /// What one observation produced.
 #[derive(Clone, Debug, Default)]
 pub struct StepOutput {
+    /// Events of this step, in order.
     pub events: HVec<EstimatorEvent, EVENTS_CAP>,
     /// A new plan to publish.
     pub plan: Option<StrikePlan>,
@@ -196,6 +232,8 @@ pub struct Estimator {
 }
 
 impl Estimator {
+    /// An idle estimator for the cell `cal` (physics, table, strike) with
+    /// settings `cfg`.
     pub fn new(cal: &Calibration, cfg: EstimatorConfig) -> Self {
         Estimator {
             cfg,

@@ -24,11 +24,14 @@ use crate::physics::Vec3;
 /// One observed ball position at a time (seconds on the caller's clock).
 #[derive(Copy, Clone, Debug, PartialEq)]
 pub struct Sample {
+    /// Observation time, s.
     pub t: f64,
+    /// Observed ball centre in the table frame T, m.
     pub pos: Vec3,
 }
 
 impl Sample {
+    /// The sample of position `pos` (m, frame T) at time `t` (s).
     pub fn new(t: f64, pos: Vec3) -> Self {
         Sample { t, pos }
     }

@@ -12,17 +12,20 @@ pub(crate) const PREDICTION_HORIZON: f64 = 2.0;
 pub struct Contact {
     /// Time of contact, s (the caller's clock).
     pub t: f64,
-    /// Ball centre at contact.
+    /// Ball centre at contact, m (table frame T).
     pub pos: Vec3,
-    /// State just before and just after the impact.
+    /// State at contact just before the impact.
     pub before: BallState,
+    /// State at contact just after the impact.
     pub after: BallState,
 }
 
 /// The predicted crossing of the hitting plane.
 #[derive(Copy, Clone, Debug, PartialEq)]
 pub struct HitPoint {
+    /// Time of the crossing, s (the caller's clock).
     pub t: f64,
+    /// Ball state at the crossing.
     pub state: BallState,
 }
 
@@ -44,8 +47,11 @@ pub enum FlightEnd {
 /// Next contact (if the ball is still to bounce) and the hitting point.
 #[derive(Copy, Clone, Debug, PartialEq)]
 pub struct Prediction {
+    /// The next table contact, if the ball bounces before the prediction ends.
     pub bounce: Option<Contact>,
+    /// The crossing of the hitting plane, if the flight reaches it.
     pub hit: Option<HitPoint>,
+    /// How the predicted flight ended.
     pub end: FlightEnd,
 }
 

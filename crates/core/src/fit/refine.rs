@@ -80,6 +80,7 @@ pub struct Refined {
     pub rms: f64,
     /// Indices (into the given samples) rejected as outliers.
     pub outliers: Vec<usize>,
+    /// Levenberg–Marquardt iterations run, over both passes.
     pub iterations: usize,
 }
 

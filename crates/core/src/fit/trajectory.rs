@@ -31,14 +31,19 @@ pub enum Method {
 /// Settings of a trajectory fit.
 #[derive(Copy, Clone, Debug, PartialEq)]
 pub struct FitConfig {
+    /// Which spin fit to run.
     pub method: Method,
+    /// The paper's start-of-trajectory outlier filter.
     pub start_filter: StartFilter,
+    /// Settings of the flight-model refinement (used by [`Method::Refined`]).
     pub refine: RefineConfig,
     /// The hitting plane x = const, m.
     pub hit_plane_x: f64,
 }
 
 impl FitConfig {
+    /// Settings for `method` and the hitting plane x = `hit_plane_x` (m),
+    /// with the default outlier filter and refinement.
     pub fn new(method: Method, hit_plane_x: f64) -> Self {
         FitConfig { method, start_filter: StartFilter::default(), refine: RefineConfig::default(), hit_plane_x }
     }
@@ -56,13 +61,24 @@ impl FitConfig {
 pub enum FitError {
     /// Fewer samples than a fit needs.
     #[error("{n} samples, at least {min} needed")]
-    TooFewSamples { n: usize, min: usize },
+    TooFewSamples {
+        /// Samples available (all of them, or the inliers before an observed bounce).
+        n: usize,
+        /// Samples needed.
+        min: usize,
+    },
     /// A sample's time is not after the previous one.
     #[error("sample {row}: time does not increase")]
-    NotMonotonic { row: usize },
+    NotMonotonic {
+        /// 0-based index of the offending sample.
+        row: usize,
+    },
     /// A sample holds NaN or infinity.
     #[error("sample {row}: non-finite value")]
-    NonFinite { row: usize },
+    NonFinite {
+        /// 0-based index of the offending sample.
+        row: usize,
+    },
     /// The samples do not determine a trajectory.
     #[error("the samples do not determine a trajectory")]
     Degenerate,
@@ -71,6 +87,7 @@ pub enum FitError {
 /// The result of fitting one flight.
 #[derive(Clone, Debug, PartialEq)]
 pub struct TrajectoryFit {
+    /// The spin fit that produced this result.
     pub method: Method,
     /// Spin before the (first observed or predicted) bounce, rad/s.
     pub spin: Vec3,
@@ -79,8 +96,9 @@ pub struct TrajectoryFit {
     /// The spin direction the trajectory determines worst and its 1σ,
     /// rad/s (refined fit only).
     pub weak_axis: Option<(Vec3, f64)>,
-    /// Time of the last observation used, and the state there.
+    /// Time of the last observation used, s.
     pub t_last: f64,
+    /// Ball state at `t_last` (past an observed bounce: after it).
     pub state_last: BallState,
     /// Samples that entered the fit (all minus outliers).
     pub samples_used: usize,

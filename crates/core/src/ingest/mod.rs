@@ -26,6 +26,7 @@ pub(crate) const RESTART_GAP: u32 = 10_000;
 /// An observation ready for the estimator.
 #[derive(Copy, Clone, Debug, PartialEq)]
 pub struct Accepted {
+    /// The tracker's sequence number.
     pub seq: u32,
     /// Capture time on our clock.
     pub capture: Instant,
@@ -51,13 +52,22 @@ pub enum Dropped {
 /// What the ingest has seen, by outcome.
 #[derive(Copy, Clone, Debug, Default, PartialEq, Eq, serde::Serialize)]
 pub struct IngestCounters {
+    /// Datagrams passed on as observations.
     pub accepted: u64,
+    /// Dropped: from a source other than the tracker.
     pub foreign: u64,
+    /// Dropped: not a usable observation datagram.
     pub malformed: u64,
+    /// Dropped: flagged by the tracker as not a ball.
     pub not_valid: u64,
+    /// Dropped: the same sequence number again.
     pub duplicate: u64,
+    /// Dropped: older than one already accepted.
     pub out_of_order: u64,
+    /// Sequence numbers that went back because the tracker restarted (the
+    /// datagram is accepted).
     pub tracker_restarts: u64,
+    /// Jumps of the tracker's clock seen by the [`ClockMap`].
     pub clock_jumps: u64,
 }
 
@@ -85,6 +95,7 @@ impl Ingest {
         }
     }
 
+    /// The counters so far, clock jumps included.
     pub fn counters(&self) -> IngestCounters {
         IngestCounters { clock_jumps: self.clock.jumps(), ..self.counters }
     }

@@ -18,8 +18,11 @@ pub(crate) const BALL_MIN_AREA: usize = 30;
 /// A measured ball circle in full-sensor pixels.
 #[derive(Copy, Clone, Debug, PartialEq)]
 pub struct Circle {
+    /// Centre column (centroid of the blob), px.
     pub u: f64,
+    /// Centre row (centroid of the blob), px.
     pub v: f64,
+    /// Radius of the disc with the blob's area, px.
     pub radius: f64,
 }
 

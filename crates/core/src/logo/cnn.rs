@@ -59,6 +59,7 @@ pub enum Backend {
 }
 
 impl Backend {
+    /// The name used on the command line and in configuration files.
     pub fn name(&self) -> &'static str {
         match self {
             Backend::Auto => "auto",
@@ -71,20 +72,45 @@ impl Backend {
 /// Why the CNN cannot run.
 #[derive(Debug, thiserror::Error)]
 pub enum CnnError {
+    /// ONNX Runtime was asked for but `ORT_DYLIB_PATH` is unset or empty.
     #[error(
         "ONNX Runtime requested but {ORT_DYLIB_ENV} names no library (install the `onnxruntime` wheel, see README)"
     )]
     NoDylib,
+    /// The ONNX Runtime shared library could not be loaded.
     #[error("cannot load ONNX Runtime from {path}: {msg}")]
-    Dylib { path: PathBuf, msg: String },
+    Dylib {
+        /// The library path from `ORT_DYLIB_PATH`.
+        path: PathBuf,
+        /// The loader's message.
+        msg: String,
+    },
+    /// The process's engine was already set up with another backend.
     #[error("the inference backend is already {active}; one process uses one backend")]
-    BackendConflict { active: &'static str },
+    BackendConflict {
+        /// Name of the backend in use ([`Backend::name`]).
+        active: &'static str,
+    },
+    /// The model file is missing, does not load, or lacks the
+    /// `visibility` / `quaternion` outputs.
     #[error("{path}: {msg}")]
-    Model { path: PathBuf, msg: String },
+    Model {
+        /// The model file.
+        path: PathBuf,
+        /// What went wrong.
+        msg: String,
+    },
+    /// Inference failed (or was given inputs of the wrong size); the message.
     #[error("inference failed: {0}")]
     Run(String),
+    /// A crop is not 60 × 60 RGB8.
     #[error("crop {index}: {len} bytes, expected a 60 × 60 RGB crop ({} bytes)", INPUT_SIZE * INPUT_SIZE * 3)]
-    BadCrop { index: usize, len: usize },
+    BadCrop {
+        /// Index of the crop in the call's input.
+        index: usize,
+        /// Its length, bytes.
+        len: usize,
+    },
 }
 
 struct Engine {

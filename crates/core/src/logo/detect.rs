@@ -31,10 +31,13 @@ pub(crate) const REF_GRID: usize = 24;
 /// An RGB8 crop placed on the sensor.
 #[derive(Copy, Clone, Debug)]
 pub struct CropImage<'a> {
-    /// Top-left pixel on the full sensor.
+    /// Column of the top-left pixel on the full sensor.
     pub x0: i64,
+    /// Row of the top-left pixel on the full sensor.
     pub y0: i64,
+    /// Crop width, px.
     pub width: usize,
+    /// Crop height, px.
     pub height: usize,
     /// Row-major RGB8.
     pub rgb: &'a [u8],

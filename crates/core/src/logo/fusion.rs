@@ -23,7 +23,9 @@ use crate::physics::Vec3;
 /// A spin estimate with its covariance, rad/s, one frame (table).
 #[derive(Copy, Clone, Debug, PartialEq)]
 pub struct SpinEstimate {
+    /// The spin ω, rad/s.
     pub spin: Vec3,
+    /// Covariance of `spin`, (rad/s)².
     pub cov: Matrix3<f64>,
 }
 
@@ -86,6 +88,7 @@ pub enum Fused {
 }
 
 impl Fused {
+    /// The resulting estimate, whichever way it was reached.
     pub fn estimate(&self) -> &SpinEstimate {
         match self {
             Fused::Both(e) | Fused::TrajectoryOnly(e, _) => e,

@@ -15,8 +15,11 @@ pub(crate) const MIN_REFERENCE_CROPS: usize = 3;
 /// circle as the camera side measured it (full-sensor pixels).
 #[derive(Copy, Clone, Debug)]
 pub struct CropInput<'a> {
+    /// Capture time, s (any fixed origin).
     pub t: f64,
+    /// The crop's pixels and its place on the sensor.
     pub crop: CropImage<'a>,
+    /// The ball's circle, full-sensor px.
     pub circle: Circle,
 }
 
@@ -32,8 +35,10 @@ pub enum LogoMethod {
 }
 
 impl LogoMethod {
+    /// Every method, in declaration order.
     pub const ALL: [LogoMethod; 3] = [LogoMethod::Centroid, LogoMethod::Segment, LogoMethod::Weighted];
 
+    /// Short lowercase name (for reports).
     pub fn name(self) -> &'static str {
         match self {
             LogoMethod::Centroid => "centroid",
@@ -57,10 +62,16 @@ impl LogoMethod {
 pub enum SequenceError {
     /// Too few crops for the ball-without-logo reference.
     #[error("{crops} crops (need at least {MIN_REFERENCE_CROPS})")]
-    TooFewCrops { crops: usize },
+    TooFewCrops {
+        /// Crops in the sequence.
+        crops: usize,
+    },
     /// A crop's circle is unusable (non-finite or non-positive radius).
     #[error("crop {index}: unusable ball circle")]
-    BadCircle { index: usize },
+    BadCircle {
+        /// Index of the crop in the sequence.
+        index: usize,
+    },
 }
 
 /// Everything a sequence gave.

@@ -31,11 +31,14 @@ use crate::physics::Vec3;
 /// the logo's centre on the unit sphere, or `None` when it was not seen.
 #[derive(Copy, Clone, Debug, PartialEq)]
 pub struct LogoSample {
+    /// Capture time, s (any fixed origin).
     pub t: f64,
+    /// The logo's centre on the unit sphere, or `None` when not seen.
     pub pos: Option<Vec3>,
 }
 
 impl LogoSample {
+    /// A sample at time `t` (s) with logo centre `pos`.
     pub fn new(t: f64, pos: Option<Vec3>) -> Self {
         LogoSample { t, pos }
     }
@@ -56,6 +59,7 @@ pub enum GapRule {
 pub struct RotationFitConfig {
     /// Fewest seen positions.
     pub min_seen: usize,
+    /// How a gap of two or more unseen frames is bridged.
     pub gap_rule: GapRule,
     /// Gauss–Newton steps refining the plane.
     pub plane_iterations: usize,
@@ -101,13 +105,21 @@ impl RotationFit {
 pub enum RotationFitError {
     /// Fewer seen positions than [`RotationFitConfig::min_seen`].
     #[error("logo seen in {seen} frames (need {needed})")]
-    TooFewSeen { seen: usize, needed: usize },
+    TooFewSeen {
+        /// Frames in which the logo was seen.
+        seen: usize,
+        /// The least number needed (`min_seen`, at least 3).
+        needed: usize,
+    },
     /// A position is not a finite unit vector, or times do not increase.
     #[error("logo positions must be finite unit vectors at increasing times")]
     BadInput,
     /// The seen positions hardly move: no plane (the logo turns in place).
     #[error("logo positions spread only {spread_deg:.1}°: no rotation plane")]
-    NoSpread { spread_deg: f64 },
+    NoSpread {
+        /// RMS spread of the seen positions about their mean, degrees.
+        spread_deg: f64,
+    },
     /// No two seen positions are one or two frames apart: the direction of
     /// rotation is unknown.
     #[error("no consecutive logo positions: direction of rotation unknown")]

@@ -62,10 +62,15 @@ pub struct SeenLogo {
 /// Counters of the logo thread.
 #[derive(Copy, Clone, Debug, Default, PartialEq, Eq, serde::Serialize)]
 pub struct LogoCounters {
+    /// Crops received.
     pub crops: u64,
+    /// Crops ignored: not 60 × 60, or not later than the previous one.
     pub dropped: u64,
+    /// Sequences ended and handed to the fit (too short ones included).
     pub sequences: u64,
+    /// Sequences that gave a spin.
     pub fitted: u64,
+    /// CNN batches whose inference failed (their logos count as unseen).
     pub inference_failures: u64,
 }
 
@@ -91,6 +96,8 @@ pub struct LogoStream {
 const CROP_BYTES: usize = cnn::INPUT_SIZE * cnn::INPUT_SIZE * 3;
 
 impl LogoStream {
+    /// An empty stream for the ceiling camera `cam`, finding logos with
+    /// `method`.
     pub fn new(cam: CameraCalib, method: Method) -> Self {
         let det = DetectorConfig::for_logo(cam.logo_angular_radius());
         LogoStream {
@@ -108,6 +115,7 @@ impl LogoStream {
         }
     }
 
+    /// The counters so far.
     pub fn counters(&self) -> LogoCounters {
         self.counters
     }

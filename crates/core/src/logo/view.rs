@@ -20,8 +20,9 @@ use crate::physics::Vec3;
 /// The view frame and pixel map of one crop.
 #[derive(Copy, Clone, Debug, PartialEq)]
 pub struct BallView {
-    /// Ball centre in full-sensor pixels.
+    /// Ball centre column in full-sensor pixels.
     pub u: f64,
+    /// Ball centre row in full-sensor pixels.
     pub v: f64,
     /// Radius of the circle with the ball image's area, px.
     pub radius: f64,

@@ -93,9 +93,14 @@ pub enum PlanRejected {
 /// The accepted target of a plan, in B.
 #[derive(Copy, Clone, Debug, PartialEq)]
 pub struct StrokeTarget {
+    /// The `seq` of the plan this target came from.
     pub seq: u32,
+    /// When the TCP should be at `pose`, s on the `Instant` clock.
     pub hit_time: f64,
+    /// TCP pose at the hit (m, rad), pulled into the workspace if needed.
     pub pose: Pose6,
+    /// TCP velocity at the hit (m/s; rotational components are 0), speed
+    /// clamped to the cell's bat-speed limit.
     pub velocity: Pose6,
     /// Whether the plan had to be clamped to fit the cell.
     pub clamped: bool,

@@ -23,8 +23,11 @@ pub struct MotionLimits {
     pub lo: Pose6,
     /// Upper corner of the workspace (orientation: home + range).
     pub hi: Pose6,
+    /// Per-axis velocity limit, m/s and rad/s.
     pub vmax: Pose6,
+    /// Per-axis acceleration limit, m/s² and rad/s².
     pub amax: Pose6,
+    /// Per-axis jerk limit, m/s³ and rad/s³.
     pub jmax: Pose6,
     /// Home = RSI start pose.
     pub home: Pose6,
@@ -32,8 +35,9 @@ pub struct MotionLimits {
     pub max_bat_speed: f64,
     /// Follow-through time after the hit, s.
     pub follow_through: f64,
-    /// Base yaw in T, rad, and base origin in T, m.
+    /// Base yaw in T, rad: the angle of B's x axis about T's z axis.
     pub base_yaw: f64,
+    /// Base origin in T, m.
     pub base_xyz: [f64; 3],
 }
 

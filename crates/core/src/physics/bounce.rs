@@ -22,6 +22,7 @@ pub struct BounceModel {
 pub(crate) const ROLLING_ALPHA: f64 = 0.4;
 
 impl BounceModel {
+    /// A contact model from restitution e, friction μ and ball radius r (m).
     pub fn new(restitution: f64, friction: f64, radius: f64) -> Self {
         BounceModel { restitution, friction, radius }
     }

@@ -16,11 +16,19 @@ use super::{PhysicsParams, Vec3};
 pub enum LiftModel {
     /// The paper's model: C_M constant, so the lift force grows linearly
     /// with ‖ω‖.
-    Constant { c_m: f64 },
+    Constant {
+        /// The Magnus coefficient C_M.
+        c_m: f64,
+    },
     /// C_M(S) = c_m / (1 + S / s_half): linear in ω at low spin, saturating
     /// at high spin (S ≫ s_half). Sawicki et al.'s C_L = S/(1 + 2S) is the
     /// member c_m = 1, s_half = 0.5.
-    Saturating { c_m: f64, s_half: f64 },
+    Saturating {
+        /// C_M at vanishing spin parameter.
+        c_m: f64,
+        /// Spin parameter at which C_M has fallen to half of `c_m`.
+        s_half: f64,
+    },
 }
 
 impl LiftModel {
@@ -52,6 +60,7 @@ pub struct FlightModel {
 }
 
 impl FlightModel {
+    /// The flight model of the ball, air and lift constants in `p`.
     pub fn new(p: &PhysicsParams) -> Self {
         let area = std::f64::consts::PI * p.radius * p.radius;
         FlightModel {
@@ -85,14 +94,17 @@ impl FlightModel {
         }
     }
 
+    /// The lift model C_M(S).
     pub fn lift(&self) -> LiftModel {
         self.lift
     }
 
+    /// Ball radius in m.
     pub fn radius(&self) -> f64 {
         self.radius
     }
 
+    /// Gravitational acceleration in m/s² (acting along −z).
     pub fn gravity(&self) -> f64 {
         self.gravity
     }

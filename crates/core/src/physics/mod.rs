@@ -22,12 +22,16 @@ pub type Vec3 = nalgebra::Vector3<f64>;
 /// (m/s) and spin (rad/s), all in the table frame.
 #[derive(Copy, Clone, Debug, PartialEq)]
 pub struct BallState {
+    /// Ball centre in the table frame T, m.
     pub pos: Vec3,
+    /// Ball velocity in T, m/s.
     pub vel: Vec3,
+    /// Ball angular velocity (spin) in T, rad/s.
     pub spin: Vec3,
 }
 
 impl BallState {
+    /// A state from position (m), velocity (m/s) and spin (rad/s) in T.
     pub fn new(pos: Vec3, vel: Vec3, spin: Vec3) -> Self {
         BallState { pos, vel, spin }
     }

@@ -99,7 +99,9 @@ impl PhysicsParams {
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 #[error("physics parameter `{key}` = {value} is out of range")]
 pub struct InvalidParam {
+    /// The offending key as named in `calib/physics.toml` (e.g. `lift.c_m`).
     pub key: &'static str,
+    /// The value it had.
     pub value: f64,
 }
 

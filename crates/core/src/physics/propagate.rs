@@ -39,18 +39,37 @@ impl StopAt {
 pub enum Event {
     /// The ball bounced on the table; `before` is the state at contact
     /// before the impact, the propagated state is after it.
-    Bounce { t: f64, before: BallState },
+    Bounce {
+        /// Time of contact, s.
+        t: f64,
+        /// State at contact, just before the impact.
+        before: BallState,
+    },
     /// The ball touched the net.
-    Net { t: f64 },
+    Net {
+        /// Time of contact with the net, s.
+        t: f64,
+    },
     /// The ball crossed the hitting plane.
-    HitPlane { t: f64 },
-    /// The ball reached the floor.
-    Floor { t: f64 },
+    HitPlane {
+        /// Time of the crossing, s.
+        t: f64,
+    },
+    /// The ball reached the floor (also reported when the state stops
+    /// being finite).
+    Floor {
+        /// Time the ball reached the floor, s.
+        t: f64,
+    },
     /// `t_max` was reached.
-    TimeLimit { t: f64 },
+    TimeLimit {
+        /// Time at which propagation stopped, s.
+        t: f64,
+    },
 }
 
 impl Event {
+    /// Absolute time of the event, s.
     pub fn t(&self) -> f64 {
         match *self {
             Event::Bounce { t, .. }
@@ -65,9 +84,13 @@ impl Event {
 /// Flight model, bounce model and table, integrated with step `dt`.
 #[derive(Copy, Clone, Debug, PartialEq)]
 pub struct Propagator {
+    /// Equation of motion between bounces.
     pub flight: FlightModel,
+    /// Table contact model applied at each bounce.
     pub bounce: BounceModel,
+    /// Table geometry (bounce area and net).
     pub table: Table,
+    /// Fixed RK4 step, s.
     pub dt: f64,
 }
 
@@ -80,6 +103,7 @@ enum Kind {
 }
 
 impl Propagator {
+    /// A propagator with the default step (4 ms).
     pub fn new(flight: FlightModel, bounce: BounceModel, table: Table) -> Self {
         Propagator { flight, bounce, table, dt: DEFAULT_STEP }
     }

@@ -23,18 +23,26 @@ pub(crate) const MAX_TEXT_LEN: usize = 64;
 /// A Cartesian pose as KUKA writes it: X, Y, Z in mm; A, B, C in degrees.
 #[derive(Copy, Clone, Debug, Default, PartialEq)]
 pub struct KukaPose {
+    /// X position, mm.
     pub x: f64,
+    /// Y position, mm.
     pub y: f64,
+    /// Z position, mm.
     pub z: f64,
+    /// A: rotation about Z, degrees.
     pub a: f64,
+    /// B: rotation about Y, degrees.
     pub b: f64,
+    /// C: rotation about X, degrees.
     pub c: f64,
 }
 
 impl KukaPose {
+    /// As `[x, y, z, a, b, c]`.
     pub fn to_array(self) -> [f64; 6] {
         [self.x, self.y, self.z, self.a, self.b, self.c]
     }
+    /// From `[x, y, z, a, b, c]`.
     pub fn from_array(v: [f64; 6]) -> Self {
         KukaPose { x: v[0], y: v[1], z: v[2], a: v[3], b: v[4], c: v[5] }
     }
@@ -51,19 +59,33 @@ pub enum CodecError {
     Xml(#[from] XmlError),
     /// The root element is not the expected `<Rob>` / `<Sen>`.
     #[error("not an RSI datagram (expected <{expected}>)")]
-    NotRsi { expected: &'static str },
+    NotRsi {
+        /// The root element name that was expected (`Rob` or `Sen`).
+        expected: &'static str,
+    },
     /// The root element is not closed.
     #[error("truncated datagram: no </{root}>")]
-    Truncated { root: &'static str },
+    Truncated {
+        /// The root element left open (`Rob` or `Sen`).
+        root: &'static str,
+    },
     /// No `<IPOC>` (every RSI datagram carries one).
     #[error("no <IPOC>")]
     MissingIpoc,
     /// An element lacks an attribute it must have.
     #[error("<{element}> has no attribute {attr}")]
-    MissingAttribute { element: &'static str, attr: &'static str },
+    MissingAttribute {
+        /// The element missing the attribute.
+        element: &'static str,
+        /// The attribute name that is missing.
+        attr: &'static str,
+    },
     /// A number that does not parse or is not finite.
     #[error("bad number in <{element}>")]
-    BadNumber { element: &'static str },
+    BadNumber {
+        /// The element whose attribute or text holds the bad number.
+        element: &'static str,
+    },
     /// The output buffer is too small.
     #[error("output buffer too small")]
     BufferTooSmall,
@@ -159,10 +181,15 @@ pub struct RobFrame {
 /// The elements a `<Rob>` may carry, in the SEND list's terms.
 #[derive(Copy, Clone, Debug, PartialEq, Eq)]
 pub enum RobElement {
+    /// `<RIst>`: actual TCP pose (`DEF_RIst`).
     RIst,
+    /// `<RSol>`: commanded TCP pose (`DEF_RSol`).
     RSol,
+    /// `<AIPos>`: actual axis angles (`DEF_AIPos`).
     AIPos,
+    /// `<ASPos>`: commanded axis angles (`DEF_ASPos`).
     ASPos,
+    /// `<Delay>`: the controller's late-packet counter (`DEF_Delay`).
     Delay,
 }
 
@@ -271,9 +298,13 @@ pub struct SenFrame<'a> {
 /// A parsed `<Sen>` (for the mock controller): texts are borrowed.
 #[derive(Copy, Clone, Debug, PartialEq)]
 pub struct SenView<'a> {
+    /// The root's `Type` attribute (SENTYPE); empty if absent.
     pub sentype: &'a [u8],
+    /// The `<EStr>` text, if present.
     pub estr: Option<&'a [u8]>,
+    /// The `<RKorr>` correction (mm, degrees), if present.
     pub rkorr: Option<KukaPose>,
+    /// The echoed IPOC.
     pub ipoc: u64,
 }
 

@@ -57,6 +57,8 @@ pub struct SessionConfig {
     pub latency_budget: Duration,
     /// No request for this long: the robot is silent.
     pub silence: Duration,
+    /// The cell's motion limits (workspace, velocity, acceleration, jerk,
+    /// home) for the generator and the safety filter.
     pub limits: MotionLimits,
 }
 
@@ -93,25 +95,64 @@ pub enum SessionState {
 pub enum SessionEvent {
     /// First request: RSI started at this IPOC; `off_home` if the robot's
     /// start pose differs from the calibrated home by > 5 mm or 1°.
-    Started { ipoc: u64, off_home: bool },
+    Started {
+        /// The first request's IPOC.
+        ipoc: u64,
+        /// The start pose (`RIst`) is off the calibrated home.
+        off_home: bool,
+    },
     /// Bytes that are not a `<Rob>` datagram (not answered).
     Malformed(CodecError),
     /// IPOC jumped: cycles were missed.
-    IpocGap { expected: u64, got: u64 },
+    IpocGap {
+        /// The IPOC one cycle after the last one.
+        expected: u64,
+        /// The IPOC received.
+        got: u64,
+    },
     /// The same IPOC again (answered with the same correction).
-    IpocRepeated { ipoc: u64 },
+    IpocRepeated {
+        /// The repeated IPOC.
+        ipoc: u64,
+    },
     /// IPOC went backwards: the clock map restarts.
-    IpocBackwards { last: u64, got: u64 },
+    IpocBackwards {
+        /// The previous request's IPOC.
+        last: u64,
+        /// The (smaller) IPOC received.
+        got: u64,
+    },
     /// The controller counted more late answers.
-    ControllerLate { delay: u64 },
+    ControllerLate {
+        /// The controller's new `<Delay>` count of late answers.
+        delay: u64,
+    },
     /// A plan became the target.
-    PlanAccepted { seq: u32, clamped: bool, late_by: Duration },
+    PlanAccepted {
+        /// The plan's sequence number.
+        seq: u32,
+        /// Whether the plan had to be clamped to fit the cell.
+        clamped: bool,
+        /// How late the stroke will reach the hitting pose (0 if on time).
+        late_by: Duration,
+    },
     /// A plan was refused.
-    PlanRejected { seq: u32, reason: PlanRejected },
+    PlanRejected {
+        /// The plan's sequence number.
+        seq: u32,
+        /// Why the generator refused it.
+        reason: PlanRejected,
+    },
     /// The safety filter changed a setpoint (first cycle of a run of them).
-    SafetyClamped { ipoc: u64 },
+    SafetyClamped {
+        /// The IPOC of the first clamped cycle.
+        ipoc: u64,
+    },
     /// Datagram in → answer sent took longer than the budget.
-    SlowAnswer { latency: Duration },
+    SlowAnswer {
+        /// Datagram in → answer sent.
+        latency: Duration,
+    },
     /// No request for `silence`.
     RobotSilent,
     /// The stroke moved to another phase.
@@ -121,18 +162,29 @@ pub enum SessionEvent {
 /// Counters since construction.
 #[derive(Copy, Clone, Debug, Default, PartialEq)]
 pub struct SessionStats {
+    /// `<Rob>` datagrams parsed.
     pub requests: u64,
+    /// `<Sen>` answers written.
     pub answers: u64,
+    /// Datagrams that were not a `<Rob>` (not answered).
     pub malformed: u64,
+    /// Requests whose IPOC skipped cycles.
     pub ipoc_gaps: u64,
+    /// Requests that repeated the previous IPOC.
     pub ipoc_repeats: u64,
     /// The controller's latest `<Delay>`.
     pub controller_delay: u64,
+    /// Plans the generator took.
     pub plans_accepted: u64,
+    /// Plans the generator refused.
     pub plans_rejected: u64,
+    /// Cycles on which the safety filter changed the setpoint.
     pub safety_clamped: u64,
+    /// Answers slower than the latency budget.
     pub slow_answers: u64,
+    /// The slowest answer seen (datagram in → answer sent).
     pub max_latency: Duration,
+    /// Events dropped because the queue was full.
     pub events_dropped: u64,
 }
 
@@ -150,10 +202,14 @@ pub enum SessionError {
 /// Invalid session configuration.
 #[derive(Copy, Clone, Debug, PartialEq, Eq, thiserror::Error)]
 pub enum ConfigError {
+    /// SENTYPE or EStr is too long or contains characters RSI XML cannot
+    /// carry unescaped.
     #[error("SENTYPE or EStr not usable in RSI XML")]
     BadText,
+    /// `precision` exceeds the codec's maximum (9).
     #[error("precision above 9")]
     BadPrecision,
+    /// `cycle_ms` is neither 4 nor 12.
     #[error("cycle must be 4 or 12 ms")]
     BadCycle,
 }
@@ -222,14 +278,17 @@ impl RsiSession {
         self.pending = Some(plan);
     }
 
+    /// Where the session stands.
     pub fn state(&self) -> SessionState {
         self.state
     }
 
+    /// Counters since construction.
     pub fn stats(&self) -> &SessionStats {
         &self.stats
     }
 
+    /// The configuration it was built with.
     pub fn config(&self) -> &SessionConfig {
         &self.cfg
     }

@@ -12,9 +12,19 @@
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Token<'a> {
     /// `<name attrs…>` or `<name attrs…/>` (`empty` = self-closing).
-    Start { name: &'a [u8], attrs: &'a [u8], empty: bool },
+    Start {
+        /// The element name.
+        name: &'a [u8],
+        /// The raw bytes after the name: attributes, not yet parsed.
+        attrs: &'a [u8],
+        /// Whether the tag is self-closing (`<name …/>`).
+        empty: bool,
+    },
     /// `</name>`.
-    End { name: &'a [u8] },
+    End {
+        /// The element name, white space trimmed.
+        name: &'a [u8],
+    },
     /// Text between tags (white space included).
     Text(&'a [u8]),
 }
@@ -23,6 +33,7 @@ pub enum Token<'a> {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
 #[error("malformed XML at byte {at}")]
 pub struct XmlError {
+    /// Byte offset into the input where the scan stopped.
     pub at: usize,
 }
 
@@ -45,6 +56,7 @@ fn is_name_byte(c: u8) -> bool {
 }
 
 impl<'a> Scanner<'a> {
+    /// A scanner at the start of `b`.
     pub fn new(b: &'a [u8]) -> Self {
         Scanner { b, i: 0 }
     }

@@ -38,28 +38,59 @@ pub(crate) const CROP_MAX_COORD: f32 = 65_536.0;
 pub enum CropError {
     /// Shorter than the header.
     #[error("crop datagram of {len} bytes (header is {CROP_HEADER_LEN})")]
-    Truncated { len: usize },
+    Truncated {
+        /// The datagram's length, bytes.
+        len: usize,
+    },
     /// Does not start with `TTI1`.
     #[error("crop datagram with wrong magic {magic:02x?}")]
-    WrongMagic { magic: [u8; 4] },
+    WrongMagic {
+        /// The first four bytes received.
+        magic: [u8; 4],
+    },
     /// Width or height is 0 or above [`CROP_MAX_SIDE`].
     #[error("crop of {width} × {height} px (each side 1..=96)")]
-    BadSize { width: u16, height: u16 },
+    BadSize {
+        /// The declared crop width, px.
+        width: u16,
+        /// The declared crop height, px.
+        height: u16,
+    },
     /// The length is not header + width · height · 3.
     #[error("crop datagram of {len} bytes (expected {expected})")]
-    WrongLength { len: usize, expected: usize },
+    WrongLength {
+        /// The datagram's length, bytes.
+        len: usize,
+        /// Header + width · height · 3, bytes.
+        expected: usize,
+    },
     /// Pixel format other than RGB8.
     #[error("crop pixel format {format} (only 0 = RGB8)")]
-    UnknownFormat { format: u8 },
+    UnknownFormat {
+        /// The pixel format byte received.
+        format: u8,
+    },
     /// The three reserved bytes are not zero.
     #[error("crop datagram with non-zero reserved bytes")]
     Reserved,
     /// u, v or radius non-finite, radius ≤ 0, or |u|, |v| implausible.
     #[error("crop with an unusable ball circle ({u}, {v}, r {radius})")]
-    BadCircle { u: f32, v: f32, radius: f32 },
+    BadCircle {
+        /// Ball centre column as sent, px.
+        u: f32,
+        /// Ball centre row as sent, px.
+        v: f32,
+        /// Ball radius as sent, px.
+        radius: f32,
+    },
     /// The output buffer is too small for [`Crop::emit`].
     #[error("buffer of {len} bytes for a crop of {needed}")]
-    BufferTooSmall { len: usize, needed: usize },
+    BufferTooSmall {
+        /// The buffer's length, bytes.
+        len: usize,
+        /// The datagram's length, bytes.
+        needed: usize,
+    },
 }
 
 mod field {
@@ -114,9 +145,11 @@ impl<T: AsRef<[u8]>> CropPacket<T> {
         out
     }
 
+    /// Sequence number.
     pub fn seq(&self) -> u32 {
         u32::from_le_bytes(self.bytes(field::SEQ))
     }
+    /// Capture time in ns on the camera's clock.
     pub fn capture_ns(&self) -> u64 {
         u64::from_le_bytes(self.bytes(field::CAPTURE))
     }
@@ -128,15 +161,19 @@ impl<T: AsRef<[u8]>> CropPacket<T> {
             f32::from_le_bytes(self.bytes(field::RADIUS)),
         ]
     }
+    /// Declared crop width, px.
     pub fn width(&self) -> u16 {
         u16::from_le_bytes(self.bytes(field::WIDTH))
     }
+    /// Declared crop height, px.
     pub fn height(&self) -> u16 {
         u16::from_le_bytes(self.bytes(field::HEIGHT))
     }
+    /// Pixel format byte (0 = RGB8).
     pub fn format(&self) -> u8 {
         self.buffer.as_ref()[field::FORMAT]
     }
+    /// The three reserved bytes (zero in a valid crop).
     pub fn reserved(&self) -> [u8; 3] {
         self.bytes(field::RESERVED)
     }
@@ -149,15 +186,20 @@ impl<T: AsRef<[u8]>> CropPacket<T> {
 /// A validated crop, borrowing its pixels.
 #[derive(Copy, Clone, Debug, PartialEq)]
 pub struct Crop<'a> {
+    /// Sequence number.
     pub seq: u32,
+    /// Capture time on the camera's clock (as parsed; the daemon maps it
+    /// to ours).
     pub capture: Instant,
-    /// Ball centre (full sensor, px); finite, |u|, |v| ≤ [`CROP_MAX_COORD`].
+    /// Ball centre column (full sensor, px); finite, |u| ≤ [`CROP_MAX_COORD`].
     pub u: f32,
+    /// Ball centre row (full sensor, px); finite, |v| ≤ `CROP_MAX_COORD`.
     pub v: f32,
     /// Ball radius, px; finite and > 0.
     pub radius: f32,
-    /// 1..=96 each.
+    /// Crop width, px (1..=96).
     pub width: u16,
+    /// Crop height, px (1..=96).
     pub height: u16,
     /// RGB8, row-major, width · height · 3 bytes.
     pub pixels: &'a [u8],

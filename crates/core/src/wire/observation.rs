@@ -57,22 +57,41 @@ impl PositionBox {
 pub enum WireError {
     /// The datagram is not exactly [`OBSERVATION_LEN`] bytes long.
     #[error("observation datagram of {len} bytes (expected {OBSERVATION_LEN})")]
-    WrongLength { len: usize },
+    WrongLength {
+        /// The datagram's actual length, bytes.
+        len: usize,
+    },
     /// The datagram does not start with `TTB1`.
     #[error("observation datagram with wrong magic {magic:02x?}")]
-    WrongMagic { magic: [u8; 4] },
+    WrongMagic {
+        /// The first four bytes received.
+        magic: [u8; 4],
+    },
     /// A coordinate is NaN or infinite.
     #[error("observation with a non-finite coordinate")]
     NonFinite,
     /// The position lies outside [`POSITION_BOX`].
     #[error("observation at ({x}, {y}, {z}) m lies outside the plausible box")]
-    OutOfBox { x: f32, y: f32, z: f32 },
+    OutOfBox {
+        /// x of the rejected position, m, table frame.
+        x: f32,
+        /// y of the rejected position, m, table frame.
+        y: f32,
+        /// z of the rejected position, m, table frame.
+        z: f32,
+    },
     /// The residual is negative or infinite (NaN, meaning unknown, is fine).
     #[error("observation with residual {residual} m (must be NaN or finite and ≥ 0)")]
-    BadResidual { residual: f32 },
+    BadResidual {
+        /// The residual received, m.
+        residual: f32,
+    },
     /// A reserved flag bit (any but bit 0) is set.
     #[error("observation with reserved flag bits set: {flags:#06x}")]
-    ReservedFlags { flags: u16 },
+    ReservedFlags {
+        /// The whole flags word received.
+        flags: u16,
+    },
 }
 
 mod field {
@@ -172,28 +191,34 @@ impl<T: AsRef<[u8]> + AsMut<[u8]>> ObservationPacket<T> {
         self.buffer.as_mut()[r].copy_from_slice(bytes);
     }
 
+    /// Writes the sequence number.
     pub fn set_seq(&mut self, v: u32) {
         self.put(field::SEQ, &v.to_le_bytes());
     }
 
+    /// Writes the capture time, ns on the tracker's monotonic clock.
     pub fn set_capture_ns(&mut self, v: u64) {
         self.put(field::CAPTURE, &v.to_le_bytes());
     }
 
+    /// Writes the position (x, y, z) in m, table frame (not validated).
     pub fn set_position(&mut self, p: [f32; 3]) {
         self.put(field::X, &p[0].to_le_bytes());
         self.put(field::Y, &p[1].to_le_bytes());
         self.put(field::Z, &p[2].to_le_bytes());
     }
 
+    /// Writes the triangulation residual in m (NaN if unknown).
     pub fn set_residual(&mut self, v: f32) {
         self.put(field::RESIDUAL, &v.to_le_bytes());
     }
 
+    /// Writes the number of cameras that saw the ball.
     pub fn set_cameras(&mut self, v: u16) {
         self.put(field::CAMERAS, &v.to_le_bytes());
     }
 
+    /// Writes the raw flags word.
     pub fn set_flags(&mut self, v: u16) {
         self.put(field::FLAGS, &v.to_le_bytes());
     }

@@ -10,12 +10,15 @@
 //!   limits and the robot's own velocity/acceleration limits, path log.
 //! - [`faults`]: drop, delay and duplicate answers — a wrapper around the
 //!   link, seeded, not `if`s in the core.
+//! - [`pair`]: the controller and the RSI session in one thread on a
+//!   virtual clock, with the same faults: exact, deterministic tests.
 //! - [`runner`]: the UDP loop on an absolute 4 ms (or 12 ms) schedule, in
 //!   process on a thread (stop flag, result) or from the command line.
 
 pub mod config;
 pub mod controller;
 pub mod faults;
+pub mod pair;
 pub mod runner;
 
 pub use controller::{CorrMode, MockController, PathSample, StopReason};

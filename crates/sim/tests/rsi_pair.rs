@@ -1,0 +1,287 @@
+//! The RSI session against the mock KR C4 on a virtual clock
+//! ([`topspin_sim::mock_krc::pair::Pair`]): what `tests/rsi_loopback.rs`
+//! and `tests/rsi_faults.rs` check over UDP on the wall clock, here exact
+//! and deterministic — no tolerance for a machine's scheduling noise, no
+//! sleeps. 10 000 cycles of strikes with every answer on time and the bat
+//! at each hitting pose at its hitting time; delayed, dropped, duplicated
+//! answers and reordered requests counted exactly; an RSI restart (also
+//! with the robot off home); 12 ms cycles, also under a 4 ms session.
+
+#![allow(clippy::needless_range_loop)] // parallel per-axis arrays
+
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use topspin_core::calib::Calibration;
+use topspin_core::motion::MotionLimits;
+use topspin_core::physics::Vec3;
+use topspin_core::plan::{EulerZyx, StrikePlan};
+use topspin_core::rsi::session::{RsiSession, SessionConfig, SessionEvent};
+use topspin_core::time::{Duration, Instant};
+use topspin_sim::mock_krc::controller::ControllerConfig;
+use topspin_sim::mock_krc::pair::Pair;
+use topspin_sim::mock_krc::{Faults, MockKrcConfig, MockResult};
+
+const T0: Instant = Instant(1_000_000_000);
+
+fn controller(cycle_ms: u32) -> ControllerConfig {
+    let mut c = MockKrcConfig::default_cell().unwrap().controller;
+    c.cycle_ms = cycle_ms;
+    c
+}
+
+fn session(cycle_ms: u32) -> RsiSession {
+    let mut cfg = SessionConfig::from_calibration(&Calibration::default_cell(), "ImFree");
+    cfg.cycle_ms = cycle_ms;
+    RsiSession::new(cfg).unwrap()
+}
+
+fn pair(session_ms: u32, controller_ms: u32, faults: Faults, late_limit: u64) -> Pair {
+    let mut c = controller(controller_ms);
+    c.late_limit = late_limit;
+    Pair::new(session(session_ms), c, faults, 11, T0)
+}
+
+/// Nothing the sensor answered drove the robot past a limit.
+fn within_limits(r: &MockResult) {
+    assert_eq!(r.poscorr_clamped, 0, "{r:?}");
+    assert_eq!(r.robot_limited, 0, "the robot's own limiter acted");
+    assert!(!r.stopped_by_monitor && !r.stopped_by_limit);
+}
+
+/// The commanded path within the cell's limits, cycle by cycle (path in
+/// mm / deg, limits in m / rad).
+fn path_within(r: &MockResult, lim: &MotionLimits, start: [f64; 6], dt: f64) {
+    let scale = |i: usize| if i < 3 { 1e3 } else { 180.0 / std::f64::consts::PI };
+    let mut v_prev = [0.0; 6];
+    for (k, s) in r.path.iter().enumerate() {
+        for i in 0..6 {
+            let x = s.commanded[i] / scale(i);
+            assert!(x >= lim.lo[i] - 1e-9 && x <= lim.hi[i] + 1e-9, "cycle {k} axis {i}: {x}");
+            let prev = if k == 0 { start[i] } else { r.path[k - 1].commanded[i] };
+            let v = (s.commanded[i] - prev) / dt / scale(i);
+            assert!(v.abs() <= lim.vmax[i] * 1.001, "cycle {k} axis {i}: v {v}");
+            let a = (v - v_prev[i]) / dt;
+            assert!(a.abs() <= lim.amax[i] * 1.001 + 0.05, "cycle {k} axis {i}: a {a}");
+            v_prev[i] = v;
+        }
+    }
+}
+
+#[test]
+fn ten_thousand_cycles_of_strikes() {
+    let cal = Calibration::default_cell();
+    let lim = MotionLimits::from_robot(&cal.robot);
+    let mut p = pair(4, 4, Faults::default(), 100);
+    let n = 10_000u64;
+    let end = T0 + Duration::from_millis(n * 4);
+
+    // A ball every second; its plan refined every cycle from 0.6 s before
+    // the hit until 80 ms before it (then committed), as the estimator does.
+    let mut rng = ChaCha8Rng::seed_from_u64(4);
+    let mut finals: Vec<StrikePlan> = Vec::new();
+    let (mut seq, mut ball) = (0u32, 0u32);
+    let mut t_ball = T0 + Duration::from_millis(400);
+    while t_ball + Duration::from_millis(1000) < end {
+        ball += 1;
+        let hit_time = t_ball + Duration::from_millis(600);
+        let fin = StrikePlan {
+            seq: 0,
+            trajectory: ball,
+            made_at: t_ball,
+            hit_time,
+            position: Vec3::new(1.60, rng.random_range(-0.45..0.45), rng.random_range(0.15..0.45)),
+            velocity: Vec3::new(-1.0, rng.random_range(-0.2..0.2), rng.random_range(-0.1..0.3)),
+            orientation: EulerZyx {
+                a: rng.random_range(-0.2..0.2),
+                b: rng.random_range(-0.6..0.45),
+                c: rng.random_range(-0.2..0.2),
+            },
+            spin: Vec3::zeros(),
+            confidence: 0.5,
+        };
+        let noise =
+            Vec3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0)) * 0.04;
+        let commit = hit_time.0 - 80_000_000;
+        while p.now() < t_ball {
+            p.step().expect("RSI running");
+        }
+        loop {
+            let t = p.now();
+            seq += 1;
+            let left = commit.saturating_sub(t.0) as f64 / (commit - t_ball.0) as f64;
+            let mut plan = fin;
+            plan.seq = seq;
+            plan.made_at = t;
+            plan.position += noise * left;
+            plan.hit_time = Instant(hit_time.0 + (left * 3e6) as u64);
+            if t.0 >= commit {
+                plan.hit_time = hit_time;
+                plan.position = fin.position;
+                p.publish(plan);
+                finals.push(plan);
+                break;
+            }
+            p.publish(plan);
+            p.step().expect("RSI running");
+        }
+        t_ball = t_ball + Duration::from_millis(1000);
+    }
+    while p.now() < end {
+        p.step().expect("RSI running");
+    }
+    let r = p.result();
+    let st = *p.session.stats();
+
+    assert_eq!(r.cycles, n);
+    assert_eq!(r.late, 0, "every answer on time");
+    assert_eq!((r.wrong_ipoc, r.malformed, r.wrong_type), (0, 0, 0), "IPOC and type echoed");
+    assert_eq!((st.requests, st.answers), (n, n), "every request answered");
+    assert_eq!((st.ipoc_gaps, st.ipoc_repeats, st.plans_rejected, st.slow_answers), (0, 0, 0, 0));
+    assert_eq!(st.max_latency, p.timing.processing);
+    within_limits(&r);
+    path_within(&r, &lim, controller(4).start, 0.004);
+
+    // The bat at each hitting pose at its hitting time.
+    assert_eq!(finals.len(), 39, "strikes");
+    let at = |t: f64| -> [f64; 6] {
+        let k = r.path.partition_point(|s| s.t.as_secs_f64() < t).clamp(1, r.path.len() - 1);
+        let (a, b) = (&r.path[k - 1], &r.path[k]);
+        let f = (t - a.t.as_secs_f64()) / (b.t.as_secs_f64() - a.t.as_secs_f64());
+        std::array::from_fn(|i| a.actual[i] + f * (b.actual[i] - a.actual[i]))
+    };
+    for plan in &finals {
+        let target = lim.point_t_to_b(plan.position) * 1e3;
+        let abc = lim.orientation_t_to_b(plan.orientation).map(f64::to_degrees);
+        let th = plan.hit_time.as_secs_f64();
+        let dist =
+            |q: [f64; 6]| ((q[0] - target.x).powi(2) + (q[1] - target.y).powi(2) + (q[2] - target.z).powi(2)).sqrt();
+        let best = (-20..=20).map(|j| dist(at(th + j as f64 * 1e-4))).fold(f64::INFINITY, f64::min);
+        let q = at(th);
+        let rot = (0..3).map(|i| (q[3 + i] - abc[i]).abs()).fold(0.0, f64::max);
+        assert!(best < 2.0, "strike {}: {best:.3} mm from the hitting point within ±2 ms", plan.trajectory);
+        assert!(rot < 0.5, "strike {}: orientation off by {rot:.3}°", plan.trajectory);
+    }
+}
+
+#[test]
+fn the_same_inputs_make_the_same_path() {
+    let run = || {
+        let mut p = pair(4, 4, Faults { drop: 0.05, duplicate: 0.05, reorder: 0.02, ..Faults::default() }, 1000);
+        p.run(500);
+        p.result()
+    };
+    assert_eq!(run(), run());
+}
+
+#[test]
+fn delayed_answers_are_late_and_stop_rsi_at_the_limit() {
+    let mut p = pair(4, 4, Faults { delay: 1.0, delay_by: Duration::from_millis(6), ..Faults::default() }, 20);
+    assert_eq!(p.run(500), 20);
+    let r = p.result();
+    assert!(r.stopped_by_limit);
+    assert_eq!((r.cycles, r.late, r.delayed), (20, 20, 20));
+    // Each delayed answer arrives in the next cycle and is refused there.
+    assert_eq!(r.wrong_ipoc, 19);
+    assert!(p.step().is_none(), "a stopped RSI sends nothing");
+}
+
+#[test]
+fn dropped_and_duplicated_answers_are_counted_not_fatal() {
+    let mut p = pair(4, 4, Faults { drop: 0.1, duplicate: 0.2, ..Faults::default() }, 1000);
+    assert_eq!(p.run(150), 150);
+    let r = p.result();
+    assert!(!r.stopped_by_limit);
+    assert!(r.dropped > 0 && r.duplicated > 0, "{r:?}");
+    // Every dropped answer is a late cycle, and nothing else is.
+    assert_eq!(r.late, r.dropped);
+    // A duplicate is the cycle's second answer: offered after the
+    // accepted one, it waits and is refused next cycle as stale.
+    assert_eq!(r.wrong_ipoc, r.duplicated);
+    assert_eq!(p.session.stats().answers, 150);
+}
+
+#[test]
+fn reordered_requests_are_answered_and_survived() {
+    let mut p = pair(4, 4, Faults { reorder: 0.05, ..Faults::default() }, 1000);
+    assert_eq!(p.run(400), 400);
+    let r = p.result();
+    let st = *p.session.stats();
+    assert!(r.reordered > 0);
+    // A held request is answered a cycle late: exactly one late cycle each.
+    assert_eq!(r.late, r.reordered);
+    assert_eq!(st.answers + st.malformed, st.requests, "every request that arrived answered");
+    assert_eq!(st.requests, 400, "the last request may still be held");
+    assert_eq!(r.poscorr_clamped, 0);
+    assert!(!r.stopped_by_monitor);
+    let events = p.take_events();
+    assert_eq!(
+        events.iter().filter(|e| matches!(e, SessionEvent::IpocBackwards { .. })).count() as u64,
+        r.reordered,
+        "the session saw each held request arrive behind the next"
+    );
+}
+
+#[test]
+fn rsi_stopped_and_restarted_resumes() {
+    let mut p = pair(4, 4, Faults::default(), 100);
+    assert_eq!(p.run(150), 150);
+    let first = p.result();
+    // The controller restarts RSI a second later: a fresh run, IPOC far ahead.
+    let mut c = controller(4);
+    c.first_ipoc = 10_000_000;
+    p.restart(Duration::from_millis(1000), c);
+    assert!(p.take_events().iter().any(|e| matches!(e, SessionEvent::RobotSilent)), "silence noticed");
+    assert_eq!(p.run(150), 150);
+    let second = p.result();
+    within_limits(&first);
+    within_limits(&second);
+    assert_eq!((first.late, second.late), (0, 0));
+    let st = p.session.stats();
+    assert_eq!((st.requests, st.answers), (300, 300));
+}
+
+#[test]
+fn rsi_restarted_with_the_robot_off_home_brings_it_home_within_limits() {
+    // After a crash mid-stroke the controller restarts RSI where the robot
+    // stopped: the session starts from that pose and brings the bat home.
+    let home = controller(4).start;
+    let mut start = home;
+    start[0] += 60.0;
+    start[2] -= 40.0;
+    let mut c = controller(4);
+    c.start = start;
+    let mut p = Pair::new(session(4), c, Faults::default(), 11, T0);
+    assert_eq!(p.run(300), 300);
+    let r = p.result();
+    within_limits(&r);
+    assert_eq!(r.late, 0);
+    let end = r.path.last().unwrap().actual;
+    for i in 0..6 {
+        assert!((end[i] - home[i]).abs() < 0.5, "from {start:?} the bat ended at {end:?}, home {home:?}");
+    }
+}
+
+#[test]
+fn twelve_ms_cycle() {
+    let mut p = pair(12, 12, Faults::default(), 100);
+    assert_eq!(p.run(80), 80);
+    let r = p.result();
+    within_limits(&r);
+    assert_eq!(r.late, 0);
+    let st = p.session.stats();
+    assert_eq!((st.answers, st.ipoc_gaps), (80, 0));
+}
+
+#[test]
+fn cycle_changed_to_12_ms_under_a_4_ms_session_is_survived() {
+    // The controller runs #IPO (12 ms) while the sensor was configured for
+    // #IPO_FAST: every IPOC step is a gap to the session, every request is
+    // still answered, and the robot is never driven past its limits.
+    let mut p = pair(4, 12, Faults::default(), 100);
+    assert_eq!(p.run(80), 80);
+    let r = p.result();
+    within_limits(&r);
+    let st = p.session.stats();
+    assert_eq!(st.answers, 80);
+    assert_eq!(st.ipoc_gaps, 79, "every step after the first");
+}
