@@ -1,9 +1,10 @@
-//! Fault tests against the mock KR C4 (short runs): delayed answers are
-//! counted late and the mock stops RSI at the limit; dropped and
-//! duplicated answers are survived; reordered requests, an RSI stop and
-//! restart and a 12 ms cycle are survived; malformed requests never crash
-//! the session. Late answers the busy machine causes are tolerated (a huge
-//! late limit) wherever the test is about something else.
+//! The RSI server's UDP shell against the mock KR C4's (short runs on the
+//! wall clock): dropped and duplicated answers are survived over real
+//! sockets, a restarted controller (a new socket, IPOC far ahead) is
+//! answered, malformed requests never crash the session. The exact fault
+//! and timing logic is tested on the virtual clock in
+//! `crates/sim/tests/rsi_pair.rs`; here late answers the busy machine
+//! causes are tolerated (a huge late limit, a stretched deadline).
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -33,16 +34,6 @@ fn run_with(faults: Faults, late_limit: u64, cycles: u64) -> MockResult {
     stop.store(true, Ordering::Relaxed);
     t.join().unwrap();
     r
-}
-
-#[test]
-fn delayed_answers_are_late_and_stop_rsi_at_the_limit() {
-    let r = run_with(Faults { delay: 1.0, delay_by: Duration::from_millis(6), ..Faults::default() }, 20, 500);
-    assert!(r.stopped_by_limit, "{r:?}");
-    assert_eq!(r.late, 20);
-    assert_eq!(r.cycles, 20);
-    // The delayed answers arrive in a later cycle and are refused.
-    assert!(r.wrong_ipoc > 0);
 }
 
 #[test]
@@ -79,6 +70,19 @@ fn malformed_requests_never_crash_the_session() {
     assert!(std::str::from_utf8(&out[..n]).unwrap().contains("<IPOC>5</IPOC>"));
 }
 
+#[test]
+fn a_restarted_controller_on_a_new_socket_is_answered() {
+    let sensor = Sensor::start();
+    let first = sensor.mock(150, None);
+    // The controller restarts RSI: a new socket, IPOC far ahead.
+    let second = sensor.mock(150, Some(10_000_000));
+    let stats = sensor.stop();
+    assert_eq!((first.cycles, second.cycles), (150, 150));
+    within_limits(&first);
+    within_limits(&second);
+    assert_eq!((stats.requests, stats.answers), (300, 300), "{stats:?}");
+}
+
 /// A sensor (RSI server) on loopback in its own thread, for several mock
 /// runs one after the other; `stop` returns the session's counters.
 struct Sensor {
@@ -88,11 +92,9 @@ struct Sensor {
 }
 
 impl Sensor {
-    fn start(cycle_ms: u32) -> Sensor {
+    fn start() -> Sensor {
         let cal = Calibration::default_cell();
-        let mut scfg = SessionConfig::from_calibration(&cal, "ImFree");
-        scfg.cycle_ms = cycle_ms;
-        let session = RsiSession::new(scfg).unwrap();
+        let session = RsiSession::new(SessionConfig::from_calibration(&cal, "ImFree")).unwrap();
         // Blocking (the daemon's default): tests run in parallel on a small
         // machine, and spinning servers would starve each other.
         let mut server = RsiServer::bind("127.0.0.1:0".parse().unwrap(), session, WaitStrategy::Blocking).unwrap();
@@ -106,35 +108,18 @@ impl Sensor {
         Sensor { addr, stop, thread }
     }
 
-    fn mock(&self, cycle_ms: u32, cycles: u64, faults: Faults, first_ipoc: Option<u64>) -> MockResult {
-        self.mock_from(cycle_ms, cycles, faults, first_ipoc, None)
-    }
-
-    /// As `mock`, the robot starting at `start` (mm, degrees) instead of home.
-    fn mock_from(
-        &self,
-        cycle_ms: u32,
-        cycles: u64,
-        faults: Faults,
-        first_ipoc: Option<u64>,
-        start: Option<[f64; 6]>,
-    ) -> MockResult {
+    fn mock(&self, cycles: u64, first_ipoc: Option<u64>) -> MockResult {
         let mut cfg = MockKrcConfig::default_cell().unwrap();
-        if let Some(p) = start {
-            cfg.controller.start = p;
-        }
         cfg.sensor = self.addr;
         cfg.bind = "127.0.0.1:0".parse().unwrap();
         cfg.cycles = Some(cycles);
         cfg.controller.late_limit = u64::MAX;
-        cfg.controller.cycle_ms = cycle_ms;
         // Stretched (as tests/demo.rs): this shared machine's scheduling
         // noise must not make answers late; a missing answer still is.
         cfg.answer_deadline = Duration::from_millis(50);
         if let Some(i) = first_ipoc {
             cfg.controller.first_ipoc = i;
         }
-        cfg.faults = faults;
         cfg.seed = 11;
         mock_krc::spawn(cfg).unwrap().join().unwrap()
     }
@@ -172,83 +157,4 @@ fn within_limits(r: &MockResult) {
     }
     assert!(!r.stopped_by_monitor, "{}", brief(r));
     assert!(!r.stopped_by_limit, "{}", brief(r));
-}
-
-#[test]
-fn reordered_requests_are_answered_and_survived() {
-    let sensor = Sensor::start(4);
-    let r = sensor.mock(4, 400, Faults { reorder: 0.05, ..Faults::default() }, None);
-    let stats = sensor.stop();
-    assert_eq!(r.cycles, 400);
-    assert!(r.reordered > 0, "{}", brief(&r));
-    // A held request is answered a cycle late: the controller counts it.
-    assert!(r.late >= r.reordered, "{}", brief(&r));
-    // Every request that reached the sensor was answered.
-    assert_eq!(stats.answers + stats.malformed, stats.requests, "{stats:?}");
-    within_limits(&r);
-}
-
-#[test]
-fn rsi_stopped_and_restarted_resumes() {
-    let sensor = Sensor::start(4);
-    let first = sensor.mock(4, 150, Faults::default(), None);
-    // The controller restarts RSI later: a fresh run, IPOC far ahead.
-    let second = sensor.mock(4, 150, Faults::default(), Some(10_000_000));
-    let stats = sensor.stop();
-    assert_eq!(first.cycles, 150);
-    assert_eq!(second.cycles, 150);
-    within_limits(&first);
-    within_limits(&second);
-    assert_eq!(stats.requests, 300, "{stats:?}");
-    assert_eq!(stats.answers, 300, "{stats:?}");
-    // Both runs answered on time (under the stretched deadline; a couple
-    // of 50 ms hiccups of this shared machine tolerated).
-    assert!(first.late + second.late <= 2, "{} / {}", brief(&first), brief(&second));
-}
-
-#[test]
-fn rsi_restarted_with_the_robot_off_home_brings_it_home_within_limits() {
-    // After a crash mid-stroke the controller restarts RSI where the robot
-    // stopped: the session starts from that pose and brings the bat home,
-    // within every limit.
-    let sensor = Sensor::start(4);
-    let home = MockKrcConfig::default_cell().unwrap().controller.start;
-    let mut start = home;
-    start[0] += 60.0;
-    start[2] -= 40.0;
-    let r = sensor.mock_from(4, 300, Faults::default(), None, Some(start));
-    let stats = sensor.stop();
-    assert_eq!(r.cycles, 300);
-    within_limits(&r);
-    assert_eq!(stats.answers, 300, "{stats:?}");
-    let end = r.path.last().unwrap().actual;
-    for i in 0..6 {
-        assert!((end[i] - home[i]).abs() < 0.5, "from {start:?} the bat ended at {end:?}, home {home:?}");
-    }
-}
-
-#[test]
-fn twelve_ms_cycle() {
-    let sensor = Sensor::start(12);
-    let r = sensor.mock(12, 80, Faults::default(), None);
-    let stats = sensor.stop();
-    assert_eq!(r.cycles, 80);
-    within_limits(&r);
-    assert_eq!(stats.ipoc_gaps, 0, "{stats:?}");
-    assert_eq!(stats.answers, 80);
-}
-
-#[test]
-fn cycle_changed_to_12_ms_under_a_4_ms_session_is_survived() {
-    // The controller runs #IPO (12 ms) while the sensor was configured for
-    // #IPO_FAST: every IPOC step is a gap to the session, every request is
-    // still answered, and its per-cycle limits (made for 4 ms) only make
-    // the motion slower, never faster than the robot allows.
-    let sensor = Sensor::start(4);
-    let r = sensor.mock(12, 80, Faults::default(), None);
-    let stats = sensor.stop();
-    assert_eq!(r.cycles, 80);
-    within_limits(&r);
-    assert_eq!(stats.answers, 80);
-    assert!(stats.ipoc_gaps >= 70, "{stats:?}");
 }

@@ -289,7 +289,7 @@ pub fn run_loopback(cfg: &DemoConfig, cal: &Calibration) -> std::io::Result<Loop
 }
 
 /// The daemon configuration the demo amounts to (tracker noise and latency).
-fn demo_daemon_config(cfg: &DemoConfig) -> topspin_daemon::config::DaemonConfig {
+pub(crate) fn demo_daemon_config(cfg: &DemoConfig) -> topspin_daemon::config::DaemonConfig {
     let mut d = topspin_daemon::config::DaemonConfig::default();
     d.tracker.noise_mm = cfg.tracker.noise_sigma.max(1e-4) * 1e3;
     d.tracker.fixed_latency_ms = cfg.tracker.latency * 1e3;
@@ -352,50 +352,8 @@ fn judge(
     mock: &mock_krc::MockResult,
     summary: &DaemonSummary,
 ) -> DemoReport {
-    let prop = cal.propagator();
-    let robot = &cal.robot;
-    let mut per_ball = Vec::new();
-    for (k, ball) in balls.iter().enumerate() {
-        let truth = &ball.truth;
-        let true_spin = Vec3::new(truth.spin[0], truth.spin[1], truth.spin[2]);
-        let reachable = reachable(cal, ball);
-        let Some(hit) = truth.hit.as_ref() else { continue };
-        let t_hit = capture_time(t0, starts[k], hit.t);
-        let launch = truth.to_launch();
-        let closest = mock
-            .path
-            .iter()
-            .filter(|s| s.t.0.abs_diff(t_hit.0) <= HIT_WINDOW.0)
-            .map(|s| {
-                let bat = robot.b_to_t(Vec3::new(s.actual[0], s.actual[1], s.actual[2]) * 1e-3);
-                let ball_at = true_state_at(&launch, &prop, s.t.secs_since(t0) - starts[k]).pos;
-                (bat - ball_at).norm()
-            })
-            .min_by(f64::total_cmp);
-        let plan = matching_plan(&summary.telemetry.last_plans, t_hit);
-        let est = plan.map(|p| p.spin);
-        let true_hit = Vec3::new(hit.pos[0], hit.pos[1], hit.pos[2]);
-        let bat_at = |t: Instant| {
-            mock.path
-                .iter()
-                .min_by_key(|s| s.t.0.abs_diff(t.0))
-                .map(|s| robot.b_to_t(Vec3::new(s.actual[0], s.actual[1], s.actual[2]) * 1e-3))
-        };
-        let tracking_err_mm = plan.and_then(|p| bat_at(p.hit_time).map(|b| (b - p.position).norm() * 1e3));
-        per_ball.push(BallVerdict {
-            ball: k,
-            setting: truth.setting.to_string(),
-            true_spin_rps: true_spin.map(rad_to_rps).into(),
-            estimated_spin_rps: est.map(|w| w.map(rad_to_rps).into()),
-            spin_err_pct: est.map(|w| (w - true_spin).norm() / true_spin.norm() * 100.0),
-            hit_err_mm: closest.map(|d| d * 1e3),
-            plan_err_mm: plan.map(|p| (p.position - true_hit).norm() * 1e3),
-            plan_dt_ms: plan.map(|p| p.hit_time.secs_since(t_hit) * 1e3),
-            tracking_err_mm,
-            reachable,
-            hit: closest.is_some_and(|d| d <= HIT_RADIUS),
-        });
-    }
+    let per_ball = judge_strokes(cal, balls, starts, t0, &mock.path, &summary.telemetry.last_plans);
+
     let reach: Vec<&BallVerdict> = per_ball.iter().filter(|b| b.reachable).collect();
     let hits = reach.iter().filter(|b| b.hit).count();
     let spin: Vec<f64> = reach.iter().filter_map(|b| b.spin_err_pct).collect();
@@ -426,6 +384,63 @@ fn judge(
         stopped_by_monitor: mock.stopped_by_monitor,
         per_ball,
     }
+}
+
+/// Judges every stroke on the truth: the bat's actual TCP (`path`, the
+/// controller's log) against the ball's true position within ±[`HIT_WINDOW`]
+/// of its true crossing of the hitting plane, and the last plan of each
+/// trajectory (`last_plans`) against the true hit.
+pub(crate) fn judge_strokes(
+    cal: &Calibration,
+    balls: &[SimBall],
+    starts: &[f64],
+    t0: Instant,
+    path: &[mock_krc::PathSample],
+    last_plans: &[StrikePlan],
+) -> Vec<BallVerdict> {
+    let prop = cal.propagator();
+    let robot = &cal.robot;
+    let mut per_ball = Vec::new();
+    for (k, ball) in balls.iter().enumerate() {
+        let truth = &ball.truth;
+        let true_spin = Vec3::new(truth.spin[0], truth.spin[1], truth.spin[2]);
+        let reachable = reachable(cal, ball);
+        let Some(hit) = truth.hit.as_ref() else { continue };
+        let t_hit = capture_time(t0, starts[k], hit.t);
+        let launch = truth.to_launch();
+        let closest = path
+            .iter()
+            .filter(|s| s.t.0.abs_diff(t_hit.0) <= HIT_WINDOW.0)
+            .map(|s| {
+                let bat = robot.b_to_t(Vec3::new(s.actual[0], s.actual[1], s.actual[2]) * 1e-3);
+                let ball_at = true_state_at(&launch, &prop, s.t.secs_since(t0) - starts[k]).pos;
+                (bat - ball_at).norm()
+            })
+            .min_by(f64::total_cmp);
+        let plan = matching_plan(last_plans, t_hit);
+        let est = plan.map(|p| p.spin);
+        let true_hit = Vec3::new(hit.pos[0], hit.pos[1], hit.pos[2]);
+        let bat_at = |t: Instant| {
+            path.iter()
+                .min_by_key(|s| s.t.0.abs_diff(t.0))
+                .map(|s| robot.b_to_t(Vec3::new(s.actual[0], s.actual[1], s.actual[2]) * 1e-3))
+        };
+        let tracking_err_mm = plan.and_then(|p| bat_at(p.hit_time).map(|b| (b - p.position).norm() * 1e3));
+        per_ball.push(BallVerdict {
+            ball: k,
+            setting: truth.setting.to_string(),
+            true_spin_rps: true_spin.map(rad_to_rps).into(),
+            estimated_spin_rps: est.map(|w| w.map(rad_to_rps).into()),
+            spin_err_pct: est.map(|w| (w - true_spin).norm() / true_spin.norm() * 100.0),
+            hit_err_mm: closest.map(|d| d * 1e3),
+            plan_err_mm: plan.map(|p| (p.position - true_hit).norm() * 1e3),
+            plan_dt_ms: plan.map(|p| p.hit_time.secs_since(t_hit) * 1e3),
+            tracking_err_mm,
+            reachable,
+            hit: closest.is_some_and(|d| d <= HIT_RADIUS),
+        });
+    }
+    per_ball
 }
 
 /// Renders each ball's pass through the ceiling camera's strip (orange

@@ -13,6 +13,8 @@
 //! - [`render`]: labelled synthetic ceiling-camera crops.
 //! - [`demo`]: tracker + daemon + mock KR C4 on loopback, judged.
 //! - [`probe`]: a minimal Foxglove WebSocket client that counts.
+//! - [`world`]: the demo's whole cell (tracker, ingest, estimator, RSI
+//!   session, mock KR C4) on a virtual clock, judged the same way.
 //!
 //! Everything is driven by `ChaCha8Rng` seeded from one `u64`; ball k draws
 //! from its own streams ([`ball_rngs`]), so ball k is the same whatever the
@@ -28,6 +30,7 @@ pub mod render;
 pub mod stream;
 pub mod tracker;
 pub mod truth;
+pub mod world;
 
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;

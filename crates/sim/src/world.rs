@@ -1,0 +1,142 @@
+//! The demo's whole cell on a virtual clock: the simulated tracker's TTB1
+//! datagrams (optionally through the tracker-side fault injector) into the
+//! daemon's sans-IO ingest and estimator, their plans through the
+//! latest-value slot into the RSI session, and the session against the
+//! mock KR C4 ([`Pair`]) — the same cores the daemon's threads own, in one
+//! thread, with no socket, sleep or clock read. Strokes are judged on the
+//! truth exactly as the loopback demo judges them
+//! ([`crate::demo::judge_strokes`]), so a run is a deterministic function
+//! of its configuration and seed.
+//!
+//! What it leaves out of the daemon: the threads' own processing time (the
+//! estimator's plan is ready when its observation arrives; the benches
+//! measure that time) and the telemetry thread.
+
+use std::net::{IpAddr, Ipv4Addr, SocketAddr};
+
+use crate::demo::{BallVerdict, DemoConfig, LEAD_IN, demo_daemon_config, judge_strokes};
+use crate::faults::{InjectedCounts, Sender, inject, plan_datagrams};
+use crate::mock_krc::pair::Pair;
+use crate::mock_krc::{Faults, MockKrcConfig, MockResult};
+use crate::{SimBall, schedule, simulate_set};
+use topspin_core::calib::Calibration;
+use topspin_core::estimator::{Estimator, EstimatorConfig};
+use topspin_core::ingest::{Ingest, IngestCounters};
+use topspin_core::plan::StrikePlan;
+use topspin_core::rsi::session::{RsiSession, SessionConfig, SessionStats};
+use topspin_core::time::{Duration, Instant};
+
+/// Where the virtual tracker's datagrams come from.
+const TRACKER: SocketAddr = SocketAddr::new(IpAddr::V4(Ipv4Addr::new(127, 0, 0, 1)), 40_001);
+/// A second device on the tracker's network (the foreign ball).
+const FOREIGN: SocketAddr = SocketAddr::new(IpAddr::V4(Ipv4Addr::new(127, 0, 0, 2)), 40_001);
+/// The virtual clock's origin (the daemon's start).
+const START: Instant = Instant(1_000_000_000);
+
+/// What one virtual session produced.
+#[derive(Debug)]
+pub struct VirtualRun {
+    /// The simulated balls, with their truth.
+    pub balls: Vec<SimBall>,
+    /// Launch of ball k, s after `t0`.
+    pub starts: Vec<f64>,
+    /// The first launch's reference time.
+    pub t0: Instant,
+    /// The controller's counters and TCP path.
+    pub mock: MockResult,
+    /// The RSI session's counters.
+    pub session: SessionStats,
+    /// The ingest's counters.
+    pub ingest: IngestCounters,
+    /// The last plan of every trajectory, in order.
+    pub last_plans: Vec<StrikePlan>,
+    /// What the tracker-side fault injector did, if it ran.
+    pub injected: Option<InjectedCounts>,
+    /// Every stroke judged on the truth.
+    pub per_ball: Vec<BallVerdict>,
+}
+
+impl VirtualRun {
+    /// Reachable balls.
+    pub fn reachable(&self) -> usize {
+        self.per_ball.iter().filter(|b| b.reachable).count()
+    }
+
+    /// Reachable balls hit.
+    pub fn hits(&self) -> usize {
+        self.per_ball.iter().filter(|b| b.reachable && b.hit).count()
+    }
+}
+
+/// Runs `cfg.balls` balls through the cell on the virtual clock until the
+/// last stroke is done and the bat is home (`cfg.tracker_faults` applied;
+/// the live view, recording and logo thread of `cfg` are not part of it).
+pub fn run_virtual(cfg: &DemoConfig, cal: &Calibration) -> VirtualRun {
+    let balls = simulate_set(cal, cfg.seed, cfg.balls, &cfg.tracker);
+    let ends: Vec<f64> = balls.iter().map(|b| b.truth.end_t).collect();
+    let starts = schedule(&ends, cfg.gap);
+    let t0 = START + Duration::from_nanos((LEAD_IN * 1e9) as u64);
+    let clean = plan_datagrams(&balls, &starts, cfg.tracker.latency, t0);
+    let (datagrams, injected) = match &cfg.tracker_faults {
+        Some(f) => {
+            let (d, counts) = inject(&clean, f, cfg.seed);
+            (d, Some(counts))
+        }
+        None => (clean, None),
+    };
+
+    let dcfg = demo_daemon_config(cfg);
+    let mut ingest = Ingest::new(cfg.runtime.tracker_source, dcfg.fixed_latency_ns());
+    let mut estimator = Estimator::new(cal, EstimatorConfig::default().with_noise(dcfg.tracker_noise_m()));
+    let session = RsiSession::new(SessionConfig::from_calibration(cal, &cfg.runtime.sentype))
+        .expect("the calibration's session configuration is valid");
+    let mut controller = MockKrcConfig::default_cell().expect("the compiled-in rsi/ files parse").controller;
+    if let Some(n) = cfg.late_limit {
+        controller.late_limit = n;
+    }
+    let mut pair = Pair::new(session, controller, Faults::default(), cfg.seed, START);
+    if let Some(d) = cfg.answer_deadline {
+        pair.timing.deadline = d;
+    }
+
+    let last_end = starts.last().copied().unwrap_or(0.0) + ends.last().copied().unwrap_or(0.0);
+    let end = t0 + Duration::from_nanos(((last_end + 0.6).max(0.0) * 1e9) as u64);
+    let mut last_plans: Vec<StrikePlan> = Vec::new();
+    let mut next = 0;
+    while pair.now() < end {
+        // Everything that reaches the daemon before this cycle's request
+        // does: its plan is in the slot when the session takes it.
+        let request_arrives = pair.now() + pair.timing.request_latency;
+        while let Some(d) = datagrams.get(next).filter(|d| d.at <= request_arrives) {
+            next += 1;
+            let from = match d.from {
+                Sender::Tracker => TRACKER,
+                Sender::Foreign => FOREIGN,
+            };
+            let Ok(accepted) = ingest.accept(d.bytes(), from, d.at) else { continue };
+            if let Some(plan) = estimator.observe(accepted.capture, accepted.pos).plan {
+                pair.publish(plan);
+                match last_plans.last_mut() {
+                    Some(last) if last.trajectory == plan.trajectory => *last = plan,
+                    _ => last_plans.push(plan),
+                }
+            }
+        }
+        if pair.step().is_none() {
+            break; // RSI stopped: the controller would need a restart
+        }
+    }
+    let mock = pair.result();
+    let per_ball = judge_strokes(cal, &balls, &starts, t0, &mock.path, &last_plans);
+    VirtualRun {
+        balls,
+        starts,
+        t0,
+        mock,
+        session: *pair.session.stats(),
+        ingest: ingest.counters(),
+        last_plans,
+        injected,
+        per_ball,
+    }
+}
