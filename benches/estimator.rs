@@ -5,7 +5,7 @@
 //! observation on its own and prints p50 / p99 / p99.9 / max.
 
 use std::hint::black_box;
-use std::time::Instant as WallClock;
+use topspin_daemon::clock;
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use topspin_core::calib::Calibration;
@@ -42,9 +42,9 @@ fn percentiles(obs: &[(Instant, Vec3)]) {
     for _ in 0..5 {
         let mut est = Estimator::new(&cal, EstimatorConfig::default());
         for &(t, p) in obs {
-            let start = WallClock::now();
+            let start = clock::now();
             let out = black_box(est.observe(t, p));
-            let ns = start.elapsed().as_nanos() as f64;
+            let ns = (clock::now() - start).0 as f64;
             let step = if out.events.iter().any(|e| matches!(e, EstimatorEvent::Started { .. })) {
                 Step::Start
             } else if out.plan.is_some() {

@@ -100,7 +100,7 @@ impl BallReference {
             }
             values.iter_mut().for_each(Vec::clear);
             for (crop, view) in crops {
-                let (du, dv) = view.from_disc(x, y);
+                let (du, dv) = view.disc_to_pixel_offset(x, y);
                 let col = (view.u + du - crop.x0 as f64).round();
                 let row = (view.v + dv - crop.y0 as f64).round();
                 if col >= 0.0 && row >= 0.0 && (col as usize) < crop.width && (row as usize) < crop.height {

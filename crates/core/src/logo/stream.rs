@@ -161,7 +161,7 @@ impl LogoStream {
         let o = self.outputs.get(i)?.seen(cnn::VISIBLE_THRESHOLD)?;
         let c = self.circles[i];
         let view = BallView::new(&self.cam, c.u, c.v, c.radius)?;
-        let (du, dv) = view.from_disc(o.x, o.y);
+        let (du, dv) = view.disc_to_pixel_offset(o.x, o.y);
         let (x0, y0) = crop_origin(c.u, c.v, cnn::INPUT_SIZE as u32, cnn::INPUT_SIZE as u32);
         Some(SeenLogo {
             crop_px: [(c.u + du - x0 as f64) as f32, (c.v + dv - y0 as f64) as f32],

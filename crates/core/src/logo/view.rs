@@ -70,7 +70,7 @@ impl BallView {
 
     /// (x, y) in ball radii → pixel offset from the centre.
     #[inline]
-    pub(crate) fn from_disc(&self, x: f64, y: f64) -> (f64, f64) {
+    pub(crate) fn disc_to_pixel_offset(&self, x: f64, y: f64) -> (f64, f64) {
         (self.m_inv[0] * x + self.m_inv[1] * y, self.m_inv[2] * x + self.m_inv[3] * y)
     }
 
@@ -123,7 +123,7 @@ mod tests {
         // Image down is view −y.
         let (x, y) = v.to_disc(0.0, 10.0);
         assert!(x.abs() < 1e-9 && (y + 0.5).abs() < 1e-9);
-        let (du, dv) = v.from_disc(0.3, -0.2);
+        let (du, dv) = v.disc_to_pixel_offset(0.3, -0.2);
         assert!((du - 6.0).abs() < 1e-9 && (dv - 4.0).abs() < 1e-9);
         // e₃ points back at the camera.
         assert!((v.to_camera(&Vec3::z()) - Vec3::new(0.0, 0.0, -1.0)).norm() < 1e-12);
@@ -136,8 +136,8 @@ mod tests {
         let p = Vec3::new(0.8, 0.0, 2.3);
         let view = BallView::of_sphere(&cam, &p, 0.02).unwrap();
         // Along u (radial) one ball radius is more pixels than across.
-        let (du, _) = view.from_disc(1.0, 0.0);
-        let (_, dv) = view.from_disc(0.0, 1.0);
+        let (du, _) = view.disc_to_pixel_offset(1.0, 0.0);
+        let (_, dv) = view.disc_to_pixel_offset(0.0, 1.0);
         assert!(du.abs() > dv.abs() * 1.04, "{du} {dv}");
         // The silhouette edge at view x = 1 is where the ray grazes the sphere.
         let u_edge = view.u + du;
