@@ -14,7 +14,7 @@ use std::path::{Path, PathBuf};
 use serde_json::json;
 
 use super::BadInput;
-use super::logo::{FolderFrame, read_png};
+use super::crops::{FolderFrame, read_png};
 use topspin_core::calib::Calibration;
 use topspin_core::calib::camera::CameraCalib;
 use topspin_core::logo::cnn::{self, CnnOutput, LogoCnn, geodesic_deg, swing_to};

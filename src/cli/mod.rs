@@ -5,6 +5,7 @@
 use clap::{Parser, Subcommand};
 
 pub mod bench;
+pub mod crops;
 pub mod demo;
 pub mod eval;
 pub mod eval_paper;
