@@ -35,6 +35,7 @@ use topspin_core::logo::stream::{LogoCounters, LogoStream, Method};
 use topspin_core::motion::generator::Phase;
 use topspin_core::rsi::session::{RsiSession, SessionConfig, SessionEvent, SessionStats};
 use topspin_core::time::{Duration, Instant};
+use topspin_core::wire::crop::crop_origin;
 use topspin_core::wire::crop::{CROP_MAX_LEN, Crop};
 
 /// Capacity of the logo → estimator ring, spins (one per ball).
@@ -497,8 +498,9 @@ fn logo_loop(
     c
 }
 
-/// A crop for the viewer, with the logo where the method saw it.
-fn logo_record(c: &Crop<'_>, logo: Option<topspin_core::logo::stream::SeenLogo>) -> LogoRecord {
+/// A crop for the viewer, with the ball and the logo in the crop's pixels
+/// (TTI1 carries the ball's circle in the camera's).
+pub(crate) fn logo_record(c: &Crop<'_>, logo: Option<topspin_core::logo::stream::SeenLogo>) -> LogoRecord {
     let mut pixels = [0u8; 3 * LOGO_CROP_SIDE * LOGO_CROP_SIDE];
     let n = c.pixels.len().min(pixels.len());
     pixels[..n].copy_from_slice(&c.pixels[..n]);
@@ -508,7 +510,10 @@ fn logo_record(c: &Crop<'_>, logo: Option<topspin_core::logo::stream::SeenLogo>)
         width: c.width,
         height: c.height,
         pixels,
-        ball_px: [c.u, c.v, c.radius],
+        ball_px: {
+            let (x0, y0) = crop_origin(c.u.into(), c.v.into(), c.width.into(), c.height.into());
+            [c.u - x0 as f32, c.v - y0 as f32, c.radius]
+        },
         logo_px: logo.map(|l| l.crop_px),
         logo_dir: logo.map(|l| l.table.into()),
     }

@@ -18,7 +18,7 @@
 //! |---|---|---|
 //! | `/view/cell` | `foxglove.SceneUpdate` | table, lines and net; robot base and workspace box (in `robot_base`); the hitting window — again every [`CELL_INTERVAL_S`] for clients that join later |
 //! | `/tf` | `foxglove.FrameTransform` | `table` → `robot_base` |
-//! | `/view/ball` | `foxglove.SceneUpdate` | each observation (`obs/<n>`, [`OBS_LIFETIME_S`]; cyan tracked, grey not tracked, red rejected by the EKF gate), the EKF estimate (`ekf`), the predicted path through the bounce to the hitting plane (`prediction`, with the crossing `hit`) after every observation, the spin arrow with its magnitude (`spin`), the logo direction (`logo`) |
+//! | `/view/ball` | `foxglove.SceneUpdate` | each observation (`obs/<n>`, [`OBS_LIFETIME_S`]; cyan tracked, grey not tracked, red rejected by the EKF gate), the EKF estimate (`ekf`), the predicted path through the bounce to the hitting plane (`prediction`, with the crossing `hit`) after every observation, the spin arrow with its magnitude (`spin`), the logo direction (`logo`); these five expire [`TRACK_LIFETIME_S`] after their last update |
 //! | `/view/robot` | `foxglove.SceneUpdate` | the planned bat (`bat_plan`: a disc at the hitting point, its velocity arrow), the actual and commanded TCP (`tcp_actual`, `tcp_commanded`, in `robot_base`) |
 //! | `/view/plan_pose` | `foxglove.PoseInFrame` | the planned bat pose (`table`) |
 //! | `/view/tcp` | `foxglove.PosesInFrame` | `[actual, commanded]` TCP (`robot_base`), every [`TCP_DECIMATION`]th RSI cycle |
@@ -54,6 +54,9 @@ pub const DEFAULT_LIVE_ADDR: &str = "127.0.0.1:8765";
 pub(crate) const CELL_INTERVAL_S: f64 = 1.0;
 /// How long an observation stays in the scene, s.
 pub(crate) const OBS_LIFETIME_S: f64 = 2.0;
+/// How long the current ball's EKF estimate, prediction, hit, spin and logo
+/// stay after their last update, s (then the scene is clear for the next).
+pub(crate) const TRACK_LIFETIME_S: f64 = 0.5;
 /// One `/view/tcp` and TCP scene message every this many RSI cycles.
 pub(crate) const TCP_DECIMATION: u64 = 5;
 /// Spacing of the predicted path's points, s.

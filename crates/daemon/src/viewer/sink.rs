@@ -12,8 +12,8 @@ use serde::Serialize;
 
 use super::{
     CELL_INTERVAL_S, FRAME_BASE, FRAME_TABLE, IDENTITY, LiveServer, OBS_LIFETIME_S, PREDICTION_HORIZON_S,
-    PREDICTION_STEP_S, PredictionErrorPlot, RsiPlot, SPIN_ARROW_M_PER_RPS, SpinPlot, TCP_DECIMATION, Topic, color, p3,
-    pose, quat_x_to, quat_zyx, stamp, v3,
+    PREDICTION_STEP_S, PredictionErrorPlot, RsiPlot, SPIN_ARROW_M_PER_RPS, SpinPlot, TCP_DECIMATION, TOPICS,
+    TRACK_LIFETIME_S, Topic, color, p3, pose, quat_x_to, quat_zyx, stamp, v3,
 };
 use crate::record::sink::RecordingSink;
 use crate::runtime::telemetry::{
@@ -56,6 +56,8 @@ struct Outputs {
     offset: u64,
     buf: Vec<u8>,
     sent: u64,
+    /// The last log time sent on each topic ([`TOPICS`] order).
+    last_log: [u64; TOPICS.len()],
 }
 
 impl Outputs {
@@ -65,6 +67,17 @@ impl Outputs {
 
     fn wall(&self, t: Instant) -> u64 {
         t.as_nanos() + self.offset
+    }
+
+    /// The log time of a message about `at` on `topic`: its wall time, held
+    /// back from running backwards. One topic carries events stamped on
+    /// different threads' clocks (`/view/robot`: plans at their making, TCP
+    /// at the RSI request), which reach the telemetry thread out of order.
+    fn log_time(&mut self, topic: Topic, at: Instant) -> u64 {
+        let wall = self.wall(at);
+        let last = &mut self.last_log[topic as usize];
+        *last = (*last).max(wall);
+        *last
     }
 
     fn emit(&mut self, topic: Topic, log_time: u64) {
@@ -83,7 +96,8 @@ impl Outputs {
         }
         self.buf.clear();
         if msg.encode(&mut self.buf).is_ok() {
-            self.emit(topic, self.wall(at));
+            let t = self.log_time(topic, at);
+            self.emit(topic, t);
         }
     }
 
@@ -93,7 +107,8 @@ impl Outputs {
         }
         self.buf.clear();
         if serde_json::to_writer(&mut self.buf, msg).is_ok() {
-            self.emit(topic, self.wall(at));
+            let t = self.log_time(topic, at);
+            self.emit(topic, t);
         }
     }
 }
@@ -149,7 +164,14 @@ impl ViewerSink {
         ViewerSink {
             cal: cal.clone(),
             prop: cal.propagator(),
-            out: Outputs { live, recording, offset: crate::clock::unix_offset_ns(), buf: Vec::new(), sent: 0 },
+            out: Outputs {
+                live,
+                recording,
+                offset: crate::clock::unix_offset_ns(),
+                buf: Vec::new(),
+                sent: 0,
+                last_log: [0; TOPICS.len()],
+            },
             ball: BallView::default(),
             obs_count: 0,
             rsi_count: 0,
@@ -284,6 +306,16 @@ impl ViewerSink {
         }
     }
 
+    /// An entity of the current ball (EKF estimate, prediction, hit, spin,
+    /// logo): refreshed with every observation, gone [`TRACK_LIFETIME_S`]
+    /// after the last, so nothing of one ball stays on screen for the next.
+    fn tracked(&self, at: Instant, id: &str) -> fm::SceneEntity {
+        fm::SceneEntity {
+            lifetime: Some(fm::Duration::saturating_from_secs_f64(TRACK_LIFETIME_S)),
+            ..self.entity(at, FRAME_TABLE, id)
+        }
+    }
+
     fn entity(&self, at: Instant, frame: &str, id: &str) -> fm::SceneEntity {
         fm::SceneEntity {
             timestamp: Some(stamp(self.out.wall(at))),
@@ -319,7 +351,7 @@ impl ViewerSink {
         let mut entities = vec![obs];
         if let Some((trajectory, state)) = track {
             self.ball.last_pos = Some(state.pos);
-            let mut ekf = self.entity(capture, FRAME_TABLE, "ekf");
+            let mut ekf = self.tracked(capture, "ekf");
             ekf.spheres.push(fm::SpherePrimitive {
                 pose: Some(pose(state.pos, IDENTITY)),
                 size: Some(v3(Vec3::repeat(2.0 * BALL_RADIUS))),
@@ -328,7 +360,7 @@ impl ViewerSink {
             entities.push(ekf);
             entities.extend(self.prediction(capture, &state));
             let rps = state.spin.map(rad_to_rps);
-            let mut spin = self.entity(capture, FRAME_TABLE, "spin");
+            let mut spin = self.tracked(capture, "spin");
             let len = (rps.norm() * SPIN_ARROW_M_PER_RPS).clamp(0.0, 0.5);
             spin.arrows.push(fm::ArrowPrimitive {
                 pose: Some(pose(state.pos, quat_x_to(state.spin))),
@@ -377,7 +409,7 @@ impl ViewerSink {
                 Event::Bounce { .. } | Event::TimeLimit { .. } => {}
             }
         }
-        let mut path = self.entity(at, FRAME_TABLE, "prediction");
+        let mut path = self.tracked(at, "prediction");
         path.lines.push(fm::LinePrimitive {
             r#type: fm::line_primitive::Type::LineStrip as i32,
             pose: Some(pose(Vec3::zeros(), IDENTITY)),
@@ -386,7 +418,7 @@ impl ViewerSink {
             color: Some(color(1.0, 0.85, 0.2, 0.9)),
             ..Default::default()
         });
-        let mut hit = self.entity(at, FRAME_TABLE, "hit");
+        let mut hit = self.tracked(at, "hit");
         if let Some(p) = crossing {
             hit.spheres.push(fm::SpherePrimitive {
                 pose: Some(pose(p, IDENTITY)),
@@ -630,31 +662,9 @@ impl TelemetrySink for ViewerSink {
             data: foxglove::bytes::Bytes::copy_from_slice(&l.pixels[..n]),
         };
         self.out.proto(Topic::LogoCrop, &image, l.capture);
-        let mut ann = fm::ImageAnnotations { timestamp: ts, ..Default::default() };
-        let [u, v, r] = l.ball_px.map(f64::from);
-        ann.circles.push(fm::CircleAnnotation {
-            timestamp: ts,
-            position: Some(fm::Point2 { x: u, y: v }),
-            diameter: 2.0 * r,
-            thickness: 1.0,
-            fill_color: Some(color(0.0, 0.0, 0.0, 0.0)),
-            outline_color: Some(color(0.2, 0.9, 1.0, 1.0)),
-            ..Default::default()
-        });
-        if let Some([lu, lv]) = l.logo_px {
-            ann.circles.push(fm::CircleAnnotation {
-                timestamp: ts,
-                position: Some(fm::Point2 { x: lu.into(), y: lv.into() }),
-                diameter: 6.0,
-                thickness: 1.0,
-                fill_color: Some(color(1.0, 0.1, 0.1, 1.0)),
-                outline_color: Some(color(1.0, 1.0, 1.0, 1.0)),
-                ..Default::default()
-            });
-        }
-        self.out.proto(Topic::LogoFit, &ann, l.capture);
+        self.out.proto(Topic::LogoFit, &logo_annotations(l, ts), l.capture);
         if let (Some(d), Some(p)) = (l.logo_dir, self.ball.last_pos) {
-            let mut e = self.entity(l.capture, FRAME_TABLE, "logo");
+            let mut e = self.tracked(l.capture, "logo");
             e.arrows.push(fm::ArrowPrimitive {
                 pose: Some(pose(p, quat_x_to(Vec3::from(d)))),
                 shaft_length: 0.04,
@@ -681,6 +691,92 @@ impl TelemetrySink for ViewerSink {
     fn flush(&mut self) {
         if let Some(r) = self.out.recording.as_mut() {
             r.flush();
+        }
+    }
+}
+
+/// `/logo/fit` on the crop of `l`: the ball's circle and the detected logo,
+/// both in the crop's pixels (the image `/logo/crop` shows).
+fn logo_annotations(l: &LogoRecord, ts: Option<fm::Timestamp>) -> fm::ImageAnnotations {
+    let mut ann = fm::ImageAnnotations { timestamp: ts, ..Default::default() };
+    let [u, v, r] = l.ball_px.map(f64::from);
+    ann.circles.push(fm::CircleAnnotation {
+        timestamp: ts,
+        position: Some(fm::Point2 { x: u, y: v }),
+        diameter: 2.0 * r,
+        thickness: 1.0,
+        fill_color: Some(color(0.0, 0.0, 0.0, 0.0)),
+        outline_color: Some(color(0.2, 0.9, 1.0, 1.0)),
+        ..Default::default()
+    });
+    if let Some([lu, lv]) = l.logo_px {
+        ann.circles.push(fm::CircleAnnotation {
+            timestamp: ts,
+            position: Some(fm::Point2 { x: lu.into(), y: lv.into() }),
+            diameter: 6.0,
+            thickness: 1.0,
+            fill_color: Some(color(1.0, 0.1, 0.1, 1.0)),
+            outline_color: Some(color(1.0, 1.0, 1.0, 1.0)),
+            ..Default::default()
+        });
+    }
+    ann
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::runtime::daemon::logo_record;
+    use topspin_core::wire::crop::Crop;
+
+    fn sink() -> ViewerSink {
+        ViewerSink::new(&Calibration::default_cell(), None, None, None)
+    }
+
+    #[test]
+    fn log_times_never_run_backwards_on_a_topic() {
+        let mut s = sink();
+        let o = s.out.offset;
+        // A plan made at 10 ms reaches the telemetry thread after an RSI
+        // request of 12 ms: both on /view/robot.
+        assert_eq!(s.out.log_time(Topic::Robot, Instant(12_000_000)), o + 12_000_000);
+        assert_eq!(s.out.log_time(Topic::Robot, Instant(10_000_000)), o + 12_000_000);
+        assert_eq!(s.out.log_time(Topic::Robot, Instant(16_000_000)), o + 16_000_000);
+        // Another topic keeps its own times.
+        assert_eq!(s.out.log_time(Topic::PlanPose, Instant(10_000_000)), o + 10_000_000);
+    }
+
+    #[test]
+    fn the_balls_entities_expire_after_it() {
+        let s = sink();
+        let state = BallState { pos: Vec3::new(-1.0, 0.0, 0.3), vel: Vec3::new(5.0, 0.0, 0.5), spin: Vec3::zeros() };
+        let mut entities = s.prediction(Instant(1_000_000_000), &state);
+        entities.push(s.tracked(Instant(1_000_000_000), "ekf"));
+        for e in &entities {
+            let life = e.lifetime.expect("a lifetime");
+            let secs = life.sec() as f64 + life.nsec() as f64 * 1e-9;
+            assert!(secs > 0.0 && (secs - TRACK_LIFETIME_S).abs() < 1e-9, "{}: {secs}", e.id);
+        }
+    }
+
+    #[test]
+    fn the_logo_annotations_are_on_the_crop() {
+        // A ball far from the sensor's origin: TTI1 gives its circle in the
+        // camera's pixels, the crop is 60 × 60 around it.
+        let pixels = vec![0u8; 60 * 60 * 3];
+        for (u, v) in [(1500.3f32, 400.7f32), (30.0, 30.0), (1869.9, 1079.2)] {
+            let crop = Crop { seq: 1, capture: Instant(5), u, v, radius: 11.5, width: 60, height: 60, pixels: &pixels };
+            let seen = topspin_core::logo::stream::SeenLogo { crop_px: [33.0, 27.5], table: Vec3::z() };
+            let ann = logo_annotations(&logo_record(&crop, Some(seen)), None);
+            assert_eq!(ann.circles.len(), 2);
+            for c in &ann.circles {
+                let p = c.position.expect("a position");
+                assert!((0.0..=60.0).contains(&p.x) && (0.0..=60.0).contains(&p.y), "({}, {}) off the crop", p.x, p.y);
+            }
+            let ball = ann.circles[0].position.unwrap();
+            // The crop starts at (⌊u⌋ − 30, ⌊v⌋ − 30): the ball near its middle.
+            assert!((ball.x - 30.0).abs() < 1.0 && (ball.y - 30.0).abs() < 1.0, "ball at ({}, {})", ball.x, ball.y);
+            assert!((ann.circles[0].diameter - 23.0).abs() < 1e-6);
         }
     }
 }
