@@ -5,6 +5,7 @@
 use clap::{Parser, Subcommand};
 
 pub mod bench;
+pub mod check;
 pub mod crops;
 pub mod demo;
 pub mod eval;
@@ -63,6 +64,9 @@ pub enum Command {
     Logo(logo::LogoArgs),
     /// Re-run a recorded session (MCAP) and compare its plans bit for bit.
     Replay(replay::ReplayArgs),
+    /// Commissioning checks: `check tracker` listens on the tracker port.
+    #[command(subcommand)]
+    Check(check::CheckCommand),
 }
 
 /// Offline commands end quietly when their reader goes away
@@ -95,6 +99,7 @@ pub fn main() -> i32 {
         Command::Render(a) => render::run(a),
         Command::Logo(a) => logo::run(a),
         Command::Replay(a) => replay::run(a),
+        Command::Check(c) => check::run(c),
     };
     match result {
         Ok(()) => 0,

@@ -13,6 +13,7 @@
 //! - [`record`]: session recording (MCAP) and bit-exact replay.
 //! - [`channels`]: the topics and schemas the recording and the view share.
 //! - [`viewer`]: the Foxglove view, live and from a recording.
+//! - [`tracker_check`]: what the tracker sends (`topspin check tracker`).
 
 pub mod channels;
 pub mod clock;
@@ -21,4 +22,5 @@ pub mod record;
 pub mod rsi_server;
 pub mod runtime;
 pub mod systemd;
+pub mod tracker_check;
 pub mod viewer;
