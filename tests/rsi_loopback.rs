@@ -26,17 +26,15 @@
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
-use rand::{Rng, SeedableRng};
-use rand_chacha::ChaCha8Rng;
 use topspin_core::calib::Calibration;
 use topspin_core::motion::MotionLimits;
-use topspin_core::physics::Vec3;
-use topspin_core::plan::{EulerZyx, StrikePlan};
+use topspin_core::plan::StrikePlan;
 use topspin_core::rsi::session::{RsiSession, SessionConfig};
-use topspin_core::time::{Duration, Instant};
+use topspin_core::time::Duration;
 use topspin_daemon::clock;
 use topspin_daemon::rsi_server::{RsiServer, WaitStrategy, plan_slot};
 use topspin_sim::mock_krc::{self, MockKrcConfig};
+use topspin_sim::strikes::strike_stream;
 
 fn env_u64(name: &str, default: u64) -> u64 {
     std::env::var(name).ok().and_then(|s| s.parse().ok()).unwrap_or(default)
@@ -75,56 +73,15 @@ fn ten_thousand_cycles_of_strikes() {
     let start = clock::now();
     let mock = mock_krc::spawn(mcfg.clone()).unwrap();
 
-    // The strike stream: a ball every second, its plan refined every 4 ms
-    // from 0.6 s before the hit until 80 ms before it (then committed).
-    let mut rng = ChaCha8Rng::seed_from_u64(4);
+    // The strike stream (`topspin_sim::strikes`), published on the wall clock.
     let end = start + Duration::from_millis(n * 4);
     let mut finals: Vec<StrikePlan> = Vec::new();
-    let mut seq = 0u32;
-    let mut ball = 0u32;
-    let mut t_ball = start + Duration::from_millis(400);
-    while t_ball + Duration::from_millis(1000) < end {
-        ball += 1;
-        let hit_time = t_ball + Duration::from_millis(600);
-        let fin = StrikePlan {
-            seq: 0,
-            trajectory: ball,
-            made_at: t_ball,
-            hit_time,
-            position: Vec3::new(1.60, rng.random_range(-0.45..0.45), rng.random_range(0.15..0.45)),
-            velocity: Vec3::new(-1.0, rng.random_range(-0.2..0.2), rng.random_range(-0.1..0.3)),
-            orientation: EulerZyx {
-                a: rng.random_range(-0.2..0.2),
-                b: rng.random_range(-0.6..0.45),
-                c: rng.random_range(-0.2..0.2),
-            },
-            spin: Vec3::zeros(),
-            confidence: 0.5,
-        };
-        let noise =
-            Vec3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0)) * 0.04;
-        let commit = hit_time.0 - 80_000_000;
-        let mut t = t_ball;
-        loop {
-            clock::sleep_until(t, Duration::from_micros(100));
-            seq += 1;
-            let left = commit.saturating_sub(t.0) as f64 / (commit - t_ball.0) as f64;
-            let mut p = fin;
-            p.seq = seq;
-            p.made_at = t;
-            p.position += noise * left;
-            p.hit_time = Instant(hit_time.0 + (left * 3e6) as u64);
-            if t.0 >= commit {
-                p.hit_time = hit_time;
-                p.position = fin.position;
-                plans.publish(p);
-                finals.push(p);
-                break;
-            }
-            plans.publish(p);
-            t = t + Duration::from_millis(4);
+    for r in strike_stream(4, start, end) {
+        clock::sleep_until(r.plan.made_at, Duration::from_micros(100));
+        plans.publish(r.plan);
+        if r.committed {
+            finals.push(r.plan);
         }
-        t_ball = t_ball + Duration::from_millis(1000);
     }
     let r = mock.join().unwrap();
     if let Ok(p) = std::env::var("TOPSPIN_LOOPBACK_CSV") {

@@ -9,6 +9,7 @@
 //! - [`tracker`]: sampling, noise, dropouts and false detections.
 //! - [`stream`]: the simulated tracker on the network (TTB1, paced).
 //! - [`faults`]: the tracker-side fault injector around the stream.
+//! - [`strikes`]: a synthetic strike-plan stream for the RSI tests.
 //! - [`mock_krc`]: the mock KR C4 (RSI client, controller model, faults).
 //! - [`render`]: labelled synthetic ceiling-camera crops.
 //! - [`demo`]: tracker + daemon + mock KR C4 on loopback, judged.
@@ -28,6 +29,7 @@ pub mod mock_krc;
 pub mod probe;
 pub mod render;
 pub mod stream;
+pub mod strikes;
 pub mod tracker;
 pub mod truth;
 pub mod world;

@@ -9,17 +9,15 @@
 
 #![allow(clippy::needless_range_loop)] // parallel per-axis arrays
 
-use rand::{Rng, SeedableRng};
-use rand_chacha::ChaCha8Rng;
 use topspin_core::calib::Calibration;
 use topspin_core::motion::MotionLimits;
-use topspin_core::physics::Vec3;
-use topspin_core::plan::{EulerZyx, StrikePlan};
+use topspin_core::plan::StrikePlan;
 use topspin_core::rsi::session::{RsiSession, SessionConfig, SessionEvent};
 use topspin_core::time::{Duration, Instant};
 use topspin_sim::mock_krc::controller::ControllerConfig;
 use topspin_sim::mock_krc::pair::Pair;
 use topspin_sim::mock_krc::{Faults, MockKrcConfig, MockResult};
+use topspin_sim::strikes::strike_stream;
 
 const T0: Instant = Instant(1_000_000_000);
 
@@ -75,56 +73,16 @@ fn ten_thousand_cycles_of_strikes() {
     let n = 10_000u64;
     let end = T0 + Duration::from_millis(n * 4);
 
-    // A ball every second; its plan refined every cycle from 0.6 s before
-    // the hit until 80 ms before it (then committed), as the estimator does.
-    let mut rng = ChaCha8Rng::seed_from_u64(4);
+    // The strike stream (`topspin_sim::strikes`), published on the virtual clock.
     let mut finals: Vec<StrikePlan> = Vec::new();
-    let (mut seq, mut ball) = (0u32, 0u32);
-    let mut t_ball = T0 + Duration::from_millis(400);
-    while t_ball + Duration::from_millis(1000) < end {
-        ball += 1;
-        let hit_time = t_ball + Duration::from_millis(600);
-        let fin = StrikePlan {
-            seq: 0,
-            trajectory: ball,
-            made_at: t_ball,
-            hit_time,
-            position: Vec3::new(1.60, rng.random_range(-0.45..0.45), rng.random_range(0.15..0.45)),
-            velocity: Vec3::new(-1.0, rng.random_range(-0.2..0.2), rng.random_range(-0.1..0.3)),
-            orientation: EulerZyx {
-                a: rng.random_range(-0.2..0.2),
-                b: rng.random_range(-0.6..0.45),
-                c: rng.random_range(-0.2..0.2),
-            },
-            spin: Vec3::zeros(),
-            confidence: 0.5,
-        };
-        let noise =
-            Vec3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0)) * 0.04;
-        let commit = hit_time.0 - 80_000_000;
-        while p.now() < t_ball {
+    for r in strike_stream(4, T0, end) {
+        while p.now() < r.plan.made_at {
             p.step().expect("RSI running");
         }
-        loop {
-            let t = p.now();
-            seq += 1;
-            let left = commit.saturating_sub(t.0) as f64 / (commit - t_ball.0) as f64;
-            let mut plan = fin;
-            plan.seq = seq;
-            plan.made_at = t;
-            plan.position += noise * left;
-            plan.hit_time = Instant(hit_time.0 + (left * 3e6) as u64);
-            if t.0 >= commit {
-                plan.hit_time = hit_time;
-                plan.position = fin.position;
-                p.publish(plan);
-                finals.push(plan);
-                break;
-            }
-            p.publish(plan);
-            p.step().expect("RSI running");
+        p.publish(r.plan);
+        if r.committed {
+            finals.push(r.plan);
         }
-        t_ball = t_ball + Duration::from_millis(1000);
     }
     while p.now() < end {
         p.step().expect("RSI running");
