@@ -11,6 +11,7 @@ use std::io;
 use std::net::{SocketAddr, UdpSocket};
 
 use serde::Serialize;
+use topspin_core::stats::quantile_sorted;
 use topspin_core::time::Instant;
 use topspin_core::wire::observation::{Observation, WireError};
 
@@ -88,10 +89,6 @@ fn kind(e: &WireError) -> &'static str {
     }
 }
 
-fn quantile(sorted: &[f64], q: f64) -> f64 {
-    sorted[((sorted.len() - 1) as f64 * q).round() as usize]
-}
-
 impl TrackerCheck {
     /// An empty check.
     pub fn new() -> Self {
@@ -145,7 +142,7 @@ impl TrackerCheck {
         let jitter_us = offset.map(|m| {
             let mut j: Vec<f64> = self.delays.iter().map(|d| (d.1 - m) as f64 * 1e-3).collect();
             j.sort_by(f64::total_cmp);
-            [quantile(&j, 0.5), quantile(&j, 0.99), j[j.len() - 1]]
+            [quantile_sorted(&j, 0.5), quantile_sorted(&j, 0.99), j[j.len() - 1]]
         });
         let clock_drift_ppm = (self.delays.len() >= 8).then(|| {
             let q = self.delays.len() / 4;
@@ -157,7 +154,7 @@ impl TrackerCheck {
         });
         let mut z = self.heights.clone();
         z.sort_by(f64::total_cmp);
-        let z_median_m = (!z.is_empty()).then(|| quantile(&z, 0.5));
+        let z_median_m = (!z.is_empty()).then(|| quantile_sorted(&z, 0.5));
         let at_rest = z.iter().filter(|h| (**h - BALL_RADIUS).abs() <= REST_TOLERANCE).count();
         let at_rest_share = if z.is_empty() { 0.0 } else { at_rest as f64 / z.len() as f64 };
         let mut findings = Vec::new();
