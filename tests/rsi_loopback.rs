@@ -34,7 +34,7 @@ use topspin_core::time::Duration;
 use topspin_daemon::clock;
 use topspin_daemon::rsi_server::{RsiServer, WaitStrategy, plan_slot};
 use topspin_sim::mock_krc::{self, MockKrcConfig};
-use topspin_sim::strikes::strike_stream;
+use topspin_sim::strikes::{StrikeMiss, strike_stream};
 
 fn env_u64(name: &str, default: u64) -> u64 {
     std::env::var(name).ok().and_then(|s| s.parse().ok()).unwrap_or(default)
@@ -166,13 +166,6 @@ fn ten_thousand_cycles_of_strikes() {
 
     // The bat at each hitting pose at its hitting time.
     assert!(finals.len() + 3 >= (n as usize * 4 / 1000), "{} strikes", finals.len());
-    let at = |t: f64| -> [f64; 6] {
-        let k = r.path.partition_point(|s| s.t.as_secs_f64() < t);
-        let k = k.clamp(1, r.path.len() - 1);
-        let (a, b) = (&r.path[k - 1], &r.path[k]);
-        let f = (t - a.t.as_secs_f64()) / (b.t.as_secs_f64() - a.t.as_secs_f64());
-        std::array::from_fn(|i| a.actual[i] + f * (b.actual[i] - a.actual[i]))
-    };
     let mut worst = (0.0f64, 0.0f64, 0.0f64);
     let mut skipped = 0;
     for p in &finals {
@@ -183,25 +176,13 @@ fn ten_thousand_cycles_of_strikes() {
             skipped += 1;
             continue;
         }
-        let target = lim.point_t_to_b(p.position) * 1e3;
-        let abc = lim.orientation_t_to_b(p.orientation).map(f64::to_degrees);
-        let th = p.hit_time.as_secs_f64();
-        let dist =
-            |q: [f64; 6]| ((q[0] - target.x).powi(2) + (q[1] - target.y).powi(2) + (q[2] - target.z).powi(2)).sqrt();
-        let best = (-20..=20).map(|j| dist(at(th + j as f64 * 1e-4))).fold(f64::INFINITY, f64::min);
-        let q = at(th);
-        let rot = (0..3).map(|i| (q[3 + i] - abc[i]).abs()).fold(0.0, f64::max);
+        let m = StrikeMiss::of(&r.path, p, &lim);
+        let (best, rot) = (m.best_mm, m.rot_deg);
         if std::env::var("DBG").is_ok() {
-            eprintln!(
-                "strike {} best {best:.2} at-hit {:.2} target {:?} q {:?}",
-                p.trajectory,
-                dist(q),
-                target,
-                &q[..3]
-            );
+            eprintln!("strike {} {m:?}", p.trajectory);
             continue;
         }
-        worst = (worst.0.max(best), worst.1.max(rot), worst.2.max(dist(q)));
+        worst = (worst.0.max(best), worst.1.max(rot), worst.2.max(m.at_hit_mm));
         assert!(best < 2.0, "strike {}: {best:.3} mm from the hitting point within ±2 ms", p.trajectory);
         assert!(rot < 0.5, "strike {}: orientation off by {rot:.3}°", p.trajectory);
     }

@@ -1,12 +1,15 @@
 //! A synthetic strike-plan stream, as the estimator publishes it: a ball
 //! every second; its plan refined every 4 ms from 0.6 s before the hit
 //! until 80 ms before it, converging on the final pose and time, then
-//! committed. Seeded; the RSI tests drive the session with it over UDP
+//! committed. Seeded; [`StrikeMiss`] measures how the robot met each
+//! committed plan. The RSI tests drive the session with it over UDP
 //! (`tests/rsi_loopback.rs`) and on the virtual clock
 //! (`crates/sim/tests/rsi_pair.rs`).
 
+use crate::mock_krc::PathSample;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
+use topspin_core::motion::MotionLimits;
 use topspin_core::physics::Vec3;
 use topspin_core::plan::{EulerZyx, StrikePlan};
 use topspin_core::time::{Duration, Instant};
@@ -68,4 +71,38 @@ pub fn strike_stream(seed: u64, start: Instant, end: Instant) -> Vec<Refinement>
         t_ball = t_ball + Duration::from_millis(1000);
     }
     out
+}
+
+/// How far the robot's actual TCP (`path`, the controller's log) was from a
+/// committed plan's hitting pose.
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub struct StrikeMiss {
+    /// Closest position to the hitting point within ±2 ms of the hit time, mm.
+    pub best_mm: f64,
+    /// Position error at the hit time, mm.
+    pub at_hit_mm: f64,
+    /// Largest orientation error (A, B, C) at the hit time, degrees.
+    pub rot_deg: f64,
+}
+
+impl StrikeMiss {
+    /// The miss of `plan` by the path (mm / deg, BASE), the actual pose
+    /// interpolated between samples; `lim` converts the plan to BASE.
+    pub fn of(path: &[PathSample], plan: &StrikePlan, lim: &MotionLimits) -> StrikeMiss {
+        let at = |t: f64| -> [f64; 6] {
+            let k = path.partition_point(|s| s.t.as_secs_f64() < t).clamp(1, path.len() - 1);
+            let (a, b) = (&path[k - 1], &path[k]);
+            let f = (t - a.t.as_secs_f64()) / (b.t.as_secs_f64() - a.t.as_secs_f64());
+            std::array::from_fn(|i| a.actual[i] + f * (b.actual[i] - a.actual[i]))
+        };
+        let target = lim.point_t_to_b(plan.position) * 1e3;
+        let abc = lim.orientation_t_to_b(plan.orientation).map(f64::to_degrees);
+        let th = plan.hit_time.as_secs_f64();
+        let dist =
+            |q: [f64; 6]| ((q[0] - target.x).powi(2) + (q[1] - target.y).powi(2) + (q[2] - target.z).powi(2)).sqrt();
+        let best_mm = (-20..=20).map(|j| dist(at(th + j as f64 * 1e-4))).fold(f64::INFINITY, f64::min);
+        let q = at(th);
+        let rot_deg = (0..3).map(|i| (q[3 + i] - abc[i]).abs()).fold(0.0, f64::max);
+        StrikeMiss { best_mm, at_hit_mm: dist(q), rot_deg }
+    }
 }

@@ -17,7 +17,7 @@ use topspin_core::time::{Duration, Instant};
 use topspin_sim::mock_krc::controller::ControllerConfig;
 use topspin_sim::mock_krc::pair::Pair;
 use topspin_sim::mock_krc::{Faults, MockKrcConfig, MockResult};
-use topspin_sim::strikes::strike_stream;
+use topspin_sim::strikes::{StrikeMiss, strike_stream};
 
 const T0: Instant = Instant(1_000_000_000);
 
@@ -101,21 +101,8 @@ fn ten_thousand_cycles_of_strikes() {
 
     // The bat at each hitting pose at its hitting time.
     assert_eq!(finals.len(), 39, "strikes");
-    let at = |t: f64| -> [f64; 6] {
-        let k = r.path.partition_point(|s| s.t.as_secs_f64() < t).clamp(1, r.path.len() - 1);
-        let (a, b) = (&r.path[k - 1], &r.path[k]);
-        let f = (t - a.t.as_secs_f64()) / (b.t.as_secs_f64() - a.t.as_secs_f64());
-        std::array::from_fn(|i| a.actual[i] + f * (b.actual[i] - a.actual[i]))
-    };
     for plan in &finals {
-        let target = lim.point_t_to_b(plan.position) * 1e3;
-        let abc = lim.orientation_t_to_b(plan.orientation).map(f64::to_degrees);
-        let th = plan.hit_time.as_secs_f64();
-        let dist =
-            |q: [f64; 6]| ((q[0] - target.x).powi(2) + (q[1] - target.y).powi(2) + (q[2] - target.z).powi(2)).sqrt();
-        let best = (-20..=20).map(|j| dist(at(th + j as f64 * 1e-4))).fold(f64::INFINITY, f64::min);
-        let q = at(th);
-        let rot = (0..3).map(|i| (q[3 + i] - abc[i]).abs()).fold(0.0, f64::max);
+        let StrikeMiss { best_mm: best, rot_deg: rot, .. } = StrikeMiss::of(&r.path, plan, &lim);
         assert!(best < 2.0, "strike {}: {best:.3} mm from the hitting point within ±2 ms", plan.trajectory);
         assert!(rot < 0.5, "strike {}: orientation off by {rot:.3}°", plan.trajectory);
     }
