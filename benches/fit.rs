@@ -9,7 +9,7 @@ use topspin_core::calib::Calibration;
 use topspin_core::fit::poly::Cubic;
 use topspin_core::fit::refine::{RefineConfig, refine};
 use topspin_core::fit::{Sample, magnus, predict};
-use topspin_core::physics::{BallState, Vec3};
+use topspin_core::physics::{BallState, FlightScales, Vec3};
 
 /// 60 observations at 150 Hz of a topspin ball from the opponent's end,
 /// with a deterministic 2 mm-scale wobble standing in for noise.
@@ -41,7 +41,7 @@ fn benches(c: &mut Criterion) {
     let lin = magnus::solve(&cubic, samples.iter().map(|s| s.t), &prop.flight).unwrap();
     let init = BallState::new(cubic.pos(0.0), cubic.vel(0.0), lin.spin_linear);
     c.bench_function("fit/refine_60", |b| {
-        b.iter(|| refine(black_box(&samples), &init, &prop, &RefineConfig::default()))
+        b.iter(|| refine(black_box(&samples), &init, FlightScales::ONE, &prop, &RefineConfig::default()))
     });
     let last = samples[samples.len() - 1];
     let state = BallState::new(cubic.pos(last.t), cubic.vel(last.t), lin.spin_linear);

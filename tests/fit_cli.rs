@@ -68,8 +68,21 @@ fn fit_json_matches_the_truth_and_names_false_detections() {
         }
         let spin = v3(&j["spin"]);
         let true_spin = v3(&truth["spin"]);
+        // The lift's scale is fitted per flight (issue 15) and trades with
+        // the spin's size: the error is what the reported σ says it is.
         let err = dist(spin, true_spin) / dist(true_spin, [0.0; 3]);
-        assert!(err < 0.1, "ball {k}: spin {spin:?} vs {true_spin:?}");
+        assert!(err < 0.15, "ball {k}: spin {spin:?} vs {true_spin:?}");
+        let std = v3(&j["spin_std"]);
+        for a in 0..3 {
+            assert!(
+                (spin[a] - true_spin[a]).abs() < 4.0 * std[a] + 2.0,
+                "ball {k}: axis {a}: {spin:?} ± {std:?} vs {true_spin:?}"
+            );
+        }
+        for key in ["lift_scale", "lift_scale_std", "drag_scale", "drag_scale_std"] {
+            assert!(j[key].as_f64().is_some_and(|v| v.is_finite() && v >= 0.0), "{key}: {j}");
+        }
+        assert!((j["drag_scale"].as_f64().unwrap() - 1.0).abs() < 0.1, "ball {k}: the simulator's own drag: {j}");
         assert_eq!(j["outliers"], serde_json::json!([0, 1]), "ball {k}");
         let bx = j["bounce"]["x"].as_f64().unwrap() - truth["bounce"]["pos"][0].as_f64().unwrap();
         let by = j["bounce"]["y"].as_f64().unwrap() - truth["bounce"]["pos"][1].as_f64().unwrap();

@@ -126,7 +126,8 @@ pub fn run(args: FitArgs) -> anyhow::Result<()> {
         MethodChoice::Paper => Method::Paper,
         MethodChoice::Refined => Method::Refined,
     };
-    let cfg = FitConfig::new(method, hit_plane_x).with_noise(args.noise_mm * 1e-3);
+    let cfg =
+        FitConfig::new(method, hit_plane_x).with_noise(args.noise_mm * 1e-3).with_variation(cal.physics.variation);
     let fit = fit_trajectory(&samples, &cal.propagator(), &cfg)
         .map_err(|e| BadInput(format!("{}: {e}", args.file.display())))?;
     if args.json {
@@ -150,6 +151,10 @@ pub fn to_json(fit: &TrajectoryFit, hit_plane_x: f64) -> Value {
         "spin_rps": v3(&fit.spin.map(rad_to_rps)),
         "spin_std": fit.spin_std.as_ref().map(v3),
         "weak_axis": fit.weak_axis.map(|(axis, std)| json!({"axis": v3(&axis), "std": if std.is_finite() { json!(std) } else { Value::Null }})),
+        "lift_scale": fit.scales.map(|(s, _)| s.lift),
+        "lift_scale_std": fit.scales.map(|(_, e)| e.lift),
+        "drag_scale": fit.scales.map(|(s, _)| s.drag),
+        "drag_scale_std": fit.scales.map(|(_, e)| e.drag),
         "t": fit.t_last,
         "position": v3(&fit.state_last.pos),
         "velocity": v3(&fit.state_last.vel),
@@ -183,6 +188,13 @@ fn summary(fit: &TrajectoryFit, hit_plane_x: f64) -> String {
             out,
             "weakest     along ({:.2}, {:.2}, {:.2}): ±{:.0} rad/s from the trajectory",
             axis.x, axis.y, axis.z, std
+        );
+    }
+    if let Some((s, e)) = fit.scales {
+        let _ = writeln!(
+            out,
+            "ball, air   drag × {:.2} ± {:.2}, lift × {:.2} ± {:.2} of the calibration",
+            s.drag, e.drag, s.lift, e.lift
         );
     }
     let s = &fit.state_last;

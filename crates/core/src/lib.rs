@@ -17,6 +17,8 @@
 //! - [`wire`]: the datagram codecs (checked view over bytes, validated value).
 //! - [`rsi`]: KUKA RSI: XML scanner, codec, and the sans-IO session.
 //! - [`motion`]: the stroke generator and the last safety filter.
+//! - [`kinematics`]: the KR 6 R900 sixx — forward and closed-form inverse
+//!   kinematics (all solutions, the continuous one), axis limits.
 //! - [`calib`]: the calibration files in `calib/`.
 //! - [`logo`]: spin from the ball's printed logo in ceiling-camera crops.
 //! - [`stats`]: median / quantile summaries.
@@ -28,6 +30,7 @@ pub mod calib;
 pub mod estimator;
 pub mod fit;
 pub mod ingest;
+pub mod kinematics;
 pub mod logo;
 pub mod motion;
 pub mod physics;

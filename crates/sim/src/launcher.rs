@@ -199,6 +199,22 @@ impl<'de> Deserialize<'de> for Setting {
     }
 }
 
+/// How the launcher's spin axis stands to the exit velocity.
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub enum SpinAxis {
+    /// A wheel launcher: the axis perpendicular to the exit velocity (the
+    /// nine settings as described above).
+    Perpendicular,
+    /// Axes as players and other machines make them: sidespin about the
+    /// table's vertical (tilted towards backspin as above) whatever the
+    /// elevation, so a rising ball spins partly along its flight; the
+    /// other axes tipped towards the flight direction by up to `max_deg`.
+    Skewed {
+        /// Largest tip of the axis towards the flight direction, degrees.
+        max_deg: f64,
+    },
+}
+
 /// One launched ball: its setting and its state at t = 0.
 #[derive(Copy, Clone, Debug, PartialEq)]
 pub struct Launch {
@@ -227,10 +243,13 @@ struct Draw {
     /// Sidespin: tilt towards backspin, rad.
     tilt: f64,
     target: (f64, f64),
+    axis: SpinAxis,
+    /// Tip of the axis towards the flight direction, rad (`SpinAxis::Skewed`).
+    skew: f64,
 }
 
 impl Draw {
-    fn sample(setting: Setting, rng: &mut impl Rng) -> Draw {
+    fn sample(setting: Setting, axis: SpinAxis, rng: &mut impl Rng) -> Draw {
         let d = setting.distribution();
         let origin =
             Vec3::new(LAUNCH_X.sample(rng), Range::new(-LAUNCH_Y_MAX, LAUNCH_Y_MAX).sample(rng), LAUNCH_Z.sample(rng));
@@ -240,7 +259,13 @@ impl Draw {
         let side_sign = if rng.random::<bool>() { 1.0 } else { -1.0 };
         let tilt = SIDESPIN_TILT_DEG.sample(rng).to_radians();
         let target = (TARGET_X.sample(rng), Range::new(-TARGET_Y_MAX, TARGET_Y_MAX).sample(rng));
-        Draw { origin, speed, spin, roll, side_sign, tilt, target }
+        // Drawn last, and only for skewed axes: the perpendicular launcher's
+        // balls stay the same draws.
+        let skew = match axis {
+            SpinAxis::Perpendicular => 0.0,
+            SpinAxis::Skewed { max_deg } => Range::new(-max_deg, max_deg).sample(rng).to_radians(),
+        };
+        Draw { origin, speed, spin, roll, side_sign, tilt, target, axis, skew }
     }
 
     /// The state at launch for elevation `el` and azimuth `az` (rad).
@@ -249,14 +274,24 @@ impl Draw {
         // Across the flight (horizontal, ⟂ dir) and "up" ⟂ dir.
         let across = Vec3::new(-az.sin(), az.cos(), 0.0);
         let up = dir.cross(&across);
+        let skewed = matches!(self.axis, SpinAxis::Skewed { .. });
+        // Skewed sidespin turns about the table's vertical, not "up" ⟂ dir.
+        let vertical = if skewed { Vec3::z() } else { up };
         let axis = match spin_type {
             SpinType::Topspin => across,
             SpinType::Backspin => -across,
-            SpinType::Sidespin => up * (self.side_sign * self.tilt.cos()) - across * self.tilt.sin(),
+            SpinType::Sidespin => vertical * (self.side_sign * self.tilt.cos()) - across * self.tilt.sin(),
         };
         // Roll about the exit velocity keeps the axis ⟂ to it.
-        let axis = nalgebra::Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(dir), self.roll) * axis;
-        BallState::new(self.origin, dir * self.speed, axis * self.spin)
+        let mut axis = nalgebra::Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(dir), self.roll) * axis;
+        if skewed && spin_type != SpinType::Sidespin {
+            // Tip towards the flight direction (about the axis ⟂ both).
+            let hinge = axis.cross(&dir);
+            if let Some(h) = nalgebra::Unit::try_new(hinge, 1e-9) {
+                axis = nalgebra::Rotation3::from_axis_angle(&h, self.skew) * axis;
+            }
+        }
+        BallState::new(self.origin, dir * self.speed, axis.normalize() * self.spin)
     }
 }
 
@@ -332,8 +367,19 @@ pub fn launch(
     hit_plane_x: f64,
     rng: &mut impl Rng,
 ) -> Result<Launch, NoValidShot> {
+    launch_with(setting, SpinAxis::Perpendicular, prop, hit_plane_x, rng)
+}
+
+/// [`launch`] with another rule for the spin axis.
+pub fn launch_with(
+    setting: Setting,
+    axis: SpinAxis,
+    prop: &Propagator,
+    hit_plane_x: f64,
+    rng: &mut impl Rng,
+) -> Result<Launch, NoValidShot> {
     for _ in 0..MAX_ATTEMPTS {
-        let draw = Draw::sample(setting, rng);
+        let draw = Draw::sample(setting, axis, rng);
         let Some((el, az)) = aim(&draw, setting.spin, prop) else {
             continue;
         };

@@ -14,6 +14,7 @@
 //! - [`render`]: labelled synthetic ceiling-camera crops.
 //! - [`demo`]: tracker + daemon + mock KR C4 on loopback, judged.
 //! - [`probe`]: a minimal Foxglove WebSocket client that counts.
+//! - [`worlds`]: physics unlike the estimator's, for judging the fit.
 //! - [`world`]: the demo's whole cell (tracker, ingest, estimator, RSI
 //!   session, mock KR C4) on a virtual clock, judged the same way.
 //!
@@ -33,11 +34,12 @@ pub mod strikes;
 pub mod tracker;
 pub mod truth;
 pub mod world;
+pub mod worlds;
 
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
-pub use launcher::{Launch, NoValidShot, Power, Setting, SpinType, launch};
+pub use launcher::{Launch, NoValidShot, Power, Setting, SpinAxis, SpinType, launch, launch_with};
 pub use tracker::{SimObservation, TrackerModel, observe};
 pub use truth::{Truth, true_state_at};
 

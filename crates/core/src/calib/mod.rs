@@ -17,7 +17,7 @@ pub use robot::RobotFile;
 const DEFAULT_PHYSICS: &str = include_str!("../../../../calib/physics.toml");
 const DEFAULT_TABLE: &str = include_str!("../../../../calib/table.toml");
 const DEFAULT_STRIKE: &str = include_str!("../../../../calib/strike.toml");
-const DEFAULT_ROBOT: &str = include_str!("../../../../calib/robot.toml");
+pub(crate) const DEFAULT_ROBOT: &str = include_str!("../../../../calib/robot.toml");
 
 /// `calib/physics.toml`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

@@ -1,15 +1,19 @@
-//! The robot cell (`calib/robot.toml`): where the KR 6 R900 stands relative
-//! to the table (T←B), its home pose, the workspace box, the Cartesian TCP
-//! limits, the controller's POSCORR limits and the RSI timing.
+//! The robot cell (`calib/robot.toml`): the KR 6 R900's joint chain, axis
+//! limits and bat (built into a [`kinematics::Arm`] by [`RobotFile::arm`]),
+//! where it stands relative to the table (T←B), its home pose, the
+//! workspace box, the Cartesian TCP limits, the controller's POSCORR limits
+//! and the RSI timing.
 //!
-//! Owns loading-time validation (every bad value is named by its key) and
-//! the conversions to radians. It does not generate motion (`motion`) or
-//! speak RSI (`rsi`).
+//! Owns loading-time validation (every bad value is named by its key; the
+//! home pose must have a joint solution within the axis limits) and the
+//! conversions to radians. It does not generate motion (`motion`), solve
+//! kinematics (`kinematics`) or speak RSI (`rsi`).
 
 #![allow(clippy::needless_range_loop)] // parallel per-axis arrays
 
 use serde::{Deserialize, Serialize};
 
+use crate::kinematics::{self, Arm, ArmGeometry, JointLimits, Joints, LimitKind, Pose, Unreachable};
 use crate::physics::Vec3;
 
 /// `calib/robot.toml`.
@@ -20,6 +24,11 @@ pub struct RobotFile {
     pub version: u32,
     /// `[robot]`: the arm and its bat.
     pub robot: RobotModel,
+    /// `[joints]`: the joint chain and the axis limits (files written before
+    /// it existed, recordings among them, get the compiled-in KR 6 R900
+    /// sixx).
+    #[serde(default = "JointAxes::compiled_in")]
+    pub joints: JointAxes,
     /// `[cell]`: where the base stands in the table frame.
     pub cell: CellPlacement,
     /// `[home]`: the home (RSI start) pose.
@@ -34,20 +43,61 @@ pub struct RobotFile {
     pub rsi: RsiTiming,
 }
 
-/// The arm itself.
+/// The arm and its bat.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct RobotModel {
     /// Robot model name (informational, shown in the viewer).
     pub model: String,
-    /// Datasheet reach (wrist centre), m.
-    pub reach_m: f64,
-    /// Flange to bat centre (the TCP), m.
+    /// Flange to bat centre (the TCP) along the flange's z, m.
     pub tool_length_m: f64,
-    /// The A2 axis (shoulder) in B, m.
-    pub shoulder_xyz_m: [f64; 3],
-    /// Datasheet axis speeds A1..A6, °/s (informational).
-    pub axis_speed_deg_s: [f64; 6],
+    /// The TCP frame's orientation in the flange frame, KUKA A, B, C,
+    /// degrees (`$TOOL` = {0, 0, tool_length, A, B, C}; the bat below a
+    /// downward flange, {0, 0, 180}, where a file does not say).
+    #[serde(default = "bat_below_flange")]
+    pub tool_abc_deg: [f64; 3],
+    /// Keys of files written before `[joints]` (recordings keep them):
+    /// read and ignored; the reach now follows from the joint chain, the
+    /// shoulder and the axis speeds live in `[joints]`.
+    #[serde(default, skip_serializing)]
+    pub reach_m: Option<f64>,
+    /// Ignored (see `reach_m`).
+    #[serde(default, skip_serializing)]
+    pub shoulder_xyz_m: Option<[f64; 3]>,
+    /// Ignored (see `reach_m`).
+    #[serde(default, skip_serializing)]
+    pub axis_speed_deg_s: Option<[f64; 6]>,
+}
+
+fn bat_below_flange() -> [f64; 3] {
+    [0.0, 0.0, 180.0]
+}
+
+impl JointAxes {
+    /// The `[joints]` of the compiled-in `calib/robot.toml`.
+    pub fn compiled_in() -> Self {
+        let file: RobotFile = toml::from_str(super::DEFAULT_ROBOT).expect("compiled-in calibration is valid (tested)");
+        file.joints
+    }
+}
+
+/// The joint chain (DESIGN §11) and the axis limits, A1..A6.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct JointAxes {
+    /// Each joint's origin in the previous link's frame, m (the
+    /// description's table; the zeros must stay zeros).
+    pub origin_xyz_m: [[f64; 3]; 6],
+    /// Lower software limit switches, degrees.
+    pub min_deg: [f64; 6],
+    /// Upper software limit switches, degrees.
+    pub max_deg: [f64; 6],
+    /// Axis speed limits, °/s.
+    pub speed_deg_s: [f64; 6],
+    /// Axis acceleration limits, °/s² (assumptions to identify).
+    pub acceleration_deg_s2: [f64; 6],
+    /// |A5| below this is the singular wrist, degrees.
+    pub singular_a5_deg: f64,
 }
 
 /// T←B: where the base stands in the table frame.
@@ -143,7 +193,8 @@ pub struct BadKey {
     /// The key, as `section.field`.
     pub key: &'static str,
     /// The bad value (for an array, the first bad element; for the reach
-    /// check, the corner's distance from the shoulder, m).
+    /// check, the corner's distance from the A1 axis at shoulder height, m;
+    /// for the home pose, the joint angle that breaks its limit, degrees).
     pub value: f64,
 }
 
@@ -169,10 +220,27 @@ impl RobotFile {
     /// Checks every value; the first bad one is named.
     pub fn validate(&self) -> Result<(), BadKey> {
         let r = &self.robot;
-        positive("robot.reach_m", &[r.reach_m])?;
         finite("robot.tool_length_m", &[r.tool_length_m])?;
-        finite("robot.shoulder_xyz_m", &r.shoulder_xyz_m)?;
-        positive("robot.axis_speed_deg_s", &r.axis_speed_deg_s)?;
+        finite("robot.tool_abc_deg", &r.tool_abc_deg)?;
+        let j = &self.joints;
+        finite("joints.origin_xyz_m", j.origin_xyz_m.as_flattened())?;
+        let geometry = ArmGeometry::from_origins(&j.origin_xyz_m, Pose::identity())
+            .map_err(|e| BadKey { key: "joints.origin_xyz_m", value: e.value })?;
+        finite("joints.min_deg", &j.min_deg)?;
+        finite("joints.max_deg", &j.max_deg)?;
+        for i in 0..6 {
+            if !(-360.0..=360.0).contains(&j.min_deg[i]) {
+                return Err(BadKey { key: "joints.min_deg", value: j.min_deg[i] });
+            }
+            if !(-360.0..=360.0).contains(&j.max_deg[i]) || j.max_deg[i] <= j.min_deg[i] {
+                return Err(BadKey { key: "joints.max_deg", value: j.max_deg[i] });
+            }
+        }
+        positive("joints.speed_deg_s", &j.speed_deg_s)?;
+        positive("joints.acceleration_deg_s2", &j.acceleration_deg_s2)?;
+        if !(0.0..45.0).contains(&j.singular_a5_deg) {
+            return Err(BadKey { key: "joints.singular_a5_deg", value: j.singular_a5_deg });
+        }
         finite("cell.base_in_table_xyz_m", &self.cell.base_in_table_xyz_m)?;
         finite("cell.base_yaw_in_table_deg", &[self.cell.base_yaw_in_table_deg])?;
         finite("home.xyz_m", &self.home.xyz_m)?;
@@ -189,17 +257,42 @@ impl RobotFile {
                 return Err(BadKey { key: "home.xyz_m", value: self.home.xyz_m[i] });
             }
         }
-        // Every corner of the box within reach of the shoulder.
-        let radius = r.reach_m + r.tool_length_m.max(0.0);
+        // Every corner of the box within reach: the wrist centre gets
+        // `reach` from the A1 axis at shoulder height, the TCP at most
+        // flange + tool_length beyond it.
+        let radius = geometry.reach() + geometry.flange + r.tool_length_m.abs();
+        let shoulder = [0.0, 0.0, geometry.shoulder_height];
         for corner in 0..8 {
             let mut d2 = 0.0;
             for i in 0..3 {
                 let c = if corner >> i & 1 == 1 { w.max_xyz_m[i] } else { w.min_xyz_m[i] };
-                d2 += (c - r.shoulder_xyz_m[i]).powi(2);
+                d2 += (c - shoulder[i]).powi(2);
             }
             if d2.sqrt() > radius {
                 return Err(BadKey { key: "workspace.max_xyz_m", value: d2.sqrt() });
             }
+        }
+        // The home pose: some joint solution within the limits, off the
+        // singular wrist.
+        let arm = self.arm();
+        if self.home_joints(&arm).is_none() {
+            let home = self.home_pose();
+            return Err(match arm.inverse_near(&home, &Joints::kuka_home()) {
+                Err(Unreachable::OutOfReach) => {
+                    BadKey { key: "home.xyz_m (out of the arm's reach)", value: self.home.xyz_m[0] }
+                }
+                Err(Unreachable::Limit(v)) => BadKey {
+                    key: "home.xyz_m (no joint solution within joints.min_deg / joints.max_deg)",
+                    value: v.value.to_degrees(),
+                },
+                Ok(q) => match arm.limits.check_position(&q) {
+                    Err(v) if v.kind == LimitKind::SingularWrist => BadKey {
+                        key: "home.abc_deg (singular wrist: |A5| under joints.singular_a5_deg)",
+                        value: v.value.to_degrees(),
+                    },
+                    _ => BadKey { key: "home.xyz_m (no joint solution within the joint limits)", value: f64::NAN },
+                },
+            });
         }
         let l = &self.limits;
         positive("limits.velocity_m_s", &l.velocity_m_s)?;
@@ -249,6 +342,55 @@ impl RobotFile {
         Ok(())
     }
 
+    /// The arm: its kinematics (chain and bat) and axis limits, in SI. For a
+    /// file that passed [`validate`](Self::validate) (entries off the
+    /// chain's shape are not read).
+    pub fn arm(&self) -> Arm {
+        let (r, j) = (&self.robot, &self.joints);
+        let o = &j.origin_xyz_m;
+        let tool = Pose::from_xyz_abc([0.0, 0.0, r.tool_length_m], r.tool_abc_deg.map(f64::to_radians));
+        Arm {
+            geometry: ArmGeometry {
+                shoulder_height: o[0][2],
+                shoulder_offset: o[1][0],
+                upper_arm: o[2][0],
+                elbow_offset: o[3][2],
+                forearm: o[4][0],
+                flange: o[5][0],
+                tool,
+            },
+            limits: JointLimits {
+                min: j.min_deg.map(f64::to_radians),
+                max: j.max_deg.map(f64::to_radians),
+                speed: j.speed_deg_s.map(f64::to_radians),
+                acceleration: j.acceleration_deg_s2.map(f64::to_radians),
+                singular_a5: j.singular_a5_deg.to_radians(),
+            },
+        }
+    }
+
+    /// The home (RSI start) pose of the TCP in B.
+    pub fn home_pose(&self) -> Pose {
+        Pose::from_xyz_abc(self.home.xyz_m, self.home.abc_deg.map(f64::to_radians))
+    }
+
+    /// The joints at the home pose: of the solutions within the limits and
+    /// off the singular wrist, the one nearest KUKA's mechanical home
+    /// ({0, −90, 90, 0, 90, 0}°). `None` when there is none (a validated
+    /// file always has one).
+    pub fn home_joints(&self, arm: &Arm) -> Option<Joints> {
+        let kuka_home = Joints::kuka_home();
+        let mut fitting: heapless::Vec<Joints, { kinematics::MAX_SOLUTIONS }> = heapless::Vec::new();
+        for s in &arm.inverse(&self.home_pose()) {
+            if let Some(q) = arm.nearest(core::slice::from_ref(s), &kuka_home)
+                && arm.limits.check_position(&q).is_ok()
+            {
+                let _ = fitting.push(q); // at most as many as solutions
+            }
+        }
+        arm.nearest(&fitting, &kuka_home)
+    }
+
     /// Maps a point from B to T.
     pub fn b_to_t(&self, p_b: Vec3) -> Vec3 {
         let (s, c) = self.cell.base_yaw_in_table_deg.to_radians().sin_cos();
@@ -287,6 +429,23 @@ mod tests {
     }
 
     #[test]
+    fn files_from_before_the_joints_section_still_load() {
+        // A version-1 file as recordings made before `[joints]` carry it.
+        let text = include_str!("../../../../calib/robot.toml");
+        let start = text.find("\n[joints]").unwrap();
+        let end = text.find("\n[cell]").unwrap();
+        let old = format!("{}{}", &text[..start], &text[end..]).replace(
+            "tool_abc_deg = [0.0, 0.0, 180.0]",
+            "reach_m = 0.901\nshoulder_xyz_m = [0.025, 0.0, 0.400]\naxis_speed_deg_s = [360.0, 300.0, 360.0, 381.0, 388.0, 615.0]",
+        );
+        assert!(!old.contains("\n[joints]") && !old.contains("\ntool_abc_deg =") && old.contains("reach_m"));
+        let r: RobotFile = toml::from_str(&old).unwrap();
+        r.validate().unwrap();
+        assert_eq!(r.joints, default_file().joints);
+        assert_eq!(r.arm(), default_file().arm());
+    }
+
+    #[test]
     fn default_cell_is_valid_and_consistent() {
         let r = default_file();
         r.validate().unwrap();
@@ -296,6 +455,52 @@ mod tests {
         assert!(p.x > r.workspace.min_xyz_m[0] && p.x < r.workspace.max_xyz_m[0]);
         let back = r.b_to_t(p);
         assert!((back - Vec3::new(1.60, 0.0, 0.3)).norm() < 1e-12);
+    }
+
+    #[test]
+    fn the_arm_is_the_description_with_the_bat() {
+        let r = default_file();
+        let arm = r.arm();
+        let bat = Pose::from_xyz_abc([0.0, 0.0, 0.20], [0.0, 0.0, std::f64::consts::PI]);
+        assert_eq!(arm.geometry, ArmGeometry::kr6_r900_sixx(bat));
+        assert!((arm.geometry.reach() - 0.901).abs() < 1e-3);
+        assert_eq!(arm.limits.max[1], 45f64.to_radians());
+        assert_eq!(arm.limits.speed[5], 615f64.to_radians());
+        // KUKA's mechanical home: the bat 0.20 m below the flange at
+        // (0.445, 0, 0.810), its frame A = 180° (the neutral bat).
+        let tcp = arm.tcp(&Joints::kuka_home());
+        let want = Pose::from_xyz_abc([0.445, 0.0, 0.610], [std::f64::consts::PI, 0.0, 0.0]);
+        let (dp, dr) = tcp.distance(&want);
+        assert!(dp < 1e-12 && dr < 1e-12, "{tcp:?}");
+    }
+
+    #[test]
+    fn home_has_a_joint_solution_within_the_limits() {
+        let r = default_file();
+        let arm = r.arm();
+        let q = r.home_joints(&arm).unwrap();
+        // The wrist centre 0.28 m above the TCP at (0.35, 0, 0.73): the
+        // elbow triangle (0.455, hypot(0.420, 0.035), shoulder → wrist)
+        // gives A2, A3; A5 bends the flange down: A2 + A3 + A5 = 90°.
+        let (u, v) = (0.35 - 0.025, 0.73 - 0.400);
+        let l3 = 0.420f64.hypot(0.035);
+        let c = (u * u + v * v - 0.455f64.powi(2) - l3 * l3) / (2.0 * 0.455 * l3);
+        let e = -c.acos();
+        let a2 = -(v.atan2(u) - (l3 * e.sin()).atan2(0.455 + l3 * e.cos()));
+        let a3 = 0.035f64.atan2(0.420) - e;
+        let want = Joints([0.0, a2, a3, 0.0, std::f64::consts::FRAC_PI_2 - a2 - a3, 0.0]);
+        assert!(q.max_abs_diff(&want) < 1e-12, "{:?}", q.degrees());
+        let d = q.degrees();
+        assert!(
+            (d[1] + 100.076).abs() < 1e-3 && (d[2] - 121.096).abs() < 1e-3 && (d[4] - 68.980).abs() < 1e-3,
+            "{d:?}"
+        );
+        assert_eq!(arm.limits.check_position(&q), Ok(()));
+        let (dp, dr) = arm.tcp(&q).distance(&r.home_pose());
+        assert!(dp < 1e-12 && dr < 1e-12);
+        // The flipped wrist {0, a2, a3, 180, −A5, 180} fits too.
+        let flipped = arm.inverse(&r.home_pose()).iter().filter(|s| arm.limits.check_position(s).is_ok()).count();
+        assert_eq!(flipped, 2);
     }
 
     #[test]
@@ -312,5 +517,42 @@ mod tests {
         let mut r = default_file();
         r.poscorr.upper_xyz_mm[2] = 10.0;
         assert_eq!(r.validate().unwrap_err().key, "poscorr.upper_xyz_mm");
+        let mut r = default_file();
+        r.joints.origin_xyz_m[3][1] = 0.01;
+        assert_eq!(r.validate().unwrap_err(), BadKey { key: "joints.origin_xyz_m", value: 0.01 });
+        let mut r = default_file();
+        r.joints.max_deg[2] = -130.0;
+        assert_eq!(r.validate().unwrap_err(), BadKey { key: "joints.max_deg", value: -130.0 });
+        let mut r = default_file();
+        r.joints.speed_deg_s[4] = 0.0;
+        assert_eq!(r.validate().unwrap_err().key, "joints.speed_deg_s");
+        let mut r = default_file();
+        r.joints.acceleration_deg_s2[0] = f64::NAN;
+        assert_eq!(r.validate().unwrap_err().key, "joints.acceleration_deg_s2");
+        let mut r = default_file();
+        r.joints.singular_a5_deg = -1.0;
+        assert_eq!(r.validate().unwrap_err().key, "joints.singular_a5_deg");
+        let mut r = default_file();
+        r.robot.tool_abc_deg[1] = f64::INFINITY;
+        assert_eq!(r.validate().unwrap_err().key, "robot.tool_abc_deg");
+        // Home out of the limits: A5 within ±60° cannot bend the bat down.
+        let mut r = default_file();
+        (r.joints.min_deg[4], r.joints.max_deg[4]) = (-60.0, 60.0);
+        let e = r.validate().unwrap_err();
+        assert!(e.key.starts_with("home.xyz_m (no joint solution"), "{e:?}");
+        assert!((e.value.abs() - 68.98).abs() < 0.01, "{e:?}");
+        // ... in the singular band (the bat tilted 50°: |A5| = 19.3°) ...
+        let mut r = default_file();
+        r.joints.singular_a5_deg = 30.0;
+        r.home.abc_deg = [180.0, 50.0, 0.0];
+        let e = r.validate().unwrap_err();
+        assert!(e.key.starts_with("home.abc_deg (singular wrist"), "{e:?}");
+        assert!(e.value.abs() > 19.0 && e.value.abs() < 20.0, "{e:?}");
+        // ... or out of reach (a longer bat reaches the box, a shorter arm not home).
+        let mut r = default_file();
+        r.joints.origin_xyz_m[2][0] = 0.2;
+        r.joints.origin_xyz_m[4][0] = 0.2;
+        r.robot.tool_length_m = 0.6;
+        assert_eq!(r.validate().unwrap_err().key, "home.xyz_m (out of the arm's reach)");
     }
 }

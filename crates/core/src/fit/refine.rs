@@ -1,8 +1,17 @@
 //! Our refinement of the paper's fit: the flight model itself is fitted to
 //! the observed positions by Levenberg–Marquardt over the initial position,
-//! velocity and spin (nine parameters), started from the paper's estimate.
-//! Unlike the cubic, the model has no approximation bias, and every sample
-//! counts with its real weight.
+//! velocity and spin and this flight's drag and lift multipliers (eleven
+//! parameters), started from the paper's estimate. Unlike the cubic, the
+//! model has no approximation bias, and every sample counts with its real
+//! weight.
+//!
+//! - Ball and air: the multipliers of k_D and of the lift
+//!   ([`FlightScales`]) are fitted in logarithm with Gaussian priors from
+//!   the calibration ([`FlightVariation`]): a flight that decelerates
+//!   faster than the calibration says is read as more drag, not bent into
+//!   a wrong spin. Where the data cannot tell a multiplier (the lift scale
+//!   and the spin's size trade off exactly under a linear lift), its prior
+//!   holds.
 //!
 //! - Robust: Huber weights (k·σ), and samples beyond `reject_sigma` of the
 //!   converged fit are named outliers and left out.
@@ -12,18 +21,26 @@
 //!   weakest direction; a weak prior keeps the spin along the flight
 //!   direction at the first sample near zero where the data cannot say (a
 //!   wheel or a racket imparts spin by tangential friction, perpendicular to
-//!   the exit velocity), instead of inventing it.
+//!   the exit velocity), instead of inventing it. The prior is a Cauchy
+//!   (heavy-tailed) one, applied by re-weighting: it yields where the data
+//!   sees a large along-velocity component (sidespin about the vertical on
+//!   a rising ball), which a Gaussian prior of the same width would erase.
 //! - The Jacobian is by forward differences, with all ten trajectories
-//!   integrated in lock step through the sample times (RK4, step ≤ the
+//!   integrated in lock step (up to twelve) through the sample times (RK4, step ≤ the
 //!   propagator's), so nothing is stored per sample.
 
 use nalgebra::{SMatrix, SVector};
 
 use super::Sample;
-use crate::physics::{BallState, Propagator, Vec3};
+use crate::physics::{BallState, FlightScales, FlightVariation, Propagator, Vec3};
 
-type M9 = SMatrix<f64, 9, 9>;
-type V9 = SVector<f64, 9>;
+/// Parameters: position (3), velocity (3), spin (3), ln drag and ln lift multipliers.
+const NP: usize = 11;
+type MP = SMatrix<f64, NP, NP>;
+type VP = SVector<f64, NP>;
+/// Index of ln(drag multiplier) and ln(lift multiplier) in θ.
+const DRAG: usize = 9;
+const LIFT: usize = 10;
 
 /// Settings of the refinement.
 #[derive(Copy, Clone, Debug, PartialEq)]
@@ -35,16 +52,22 @@ pub struct RefineConfig {
     /// Samples farther than this many σ (of the 3D residual) from the
     /// converged fit are outliers.
     pub reject_sigma: f64,
-    /// Prior standard deviation of the spin along the flight direction at
-    /// the first sample, rad/s (weak: the data wins wherever it can see).
+    /// Scale of the (Cauchy) prior on the spin along the flight direction
+    /// at the first sample, rad/s: weak, and yielding where the data sees.
     pub prior_along_velocity: f64,
-    /// Prior standard deviation of each spin component, rad/s (very weak;
-    /// keeps the problem well-posed).
+    /// Prior standard deviation of each spin component, rad/s: real balls
+    /// reach 100–175 rps (DESIGN §3), so 800 rad/s (127 rps) is weak; it
+    /// matters only where the lift saturates and the trajectory no longer
+    /// tells the spin's size.
     pub prior_spin: f64,
+    /// Prior spread of this flight's drag and lift multipliers (0: keep
+    /// the given multiplier).
+    pub variation: FlightVariation,
     /// Iteration cap.
     pub max_iterations: usize,
-    /// Keep the spin at its initial value and fit position and velocity
-    /// only (after a bounce, where the spin comes from the bounce model).
+    /// Keep the spin and the multipliers at their initial values and fit
+    /// position and velocity only (after a bounce, where the spin comes
+    /// from the bounce model).
     pub fix_spin: bool,
 }
 
@@ -55,7 +78,8 @@ impl Default for RefineConfig {
             huber_k: 2.5,
             reject_sigma: 6.0,
             prior_along_velocity: 15.0,
-            prior_spin: 3000.0,
+            prior_spin: 800.0,
+            variation: FlightVariation::default(),
             max_iterations: 30,
             fix_spin: false,
         }
@@ -69,6 +93,10 @@ pub struct Refined {
     pub t0: f64,
     /// Position, velocity and spin at `t0`.
     pub state: BallState,
+    /// This flight's drag and lift multipliers.
+    pub scales: FlightScales,
+    /// 1σ of the drag and the lift multiplier (data and prior; 0 where held).
+    pub scales_std: FlightScales,
     /// 1σ of each spin component, rad/s (data and prior).
     pub spin_std: Vec3,
     /// The direction of ω the data determines worst (unit vector).
@@ -84,14 +112,23 @@ pub struct Refined {
     pub iterations: usize,
 }
 
-const STEPS: [f64; 9] = [1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-3, 1e-3, 1e-3];
+const STEPS: [f64; NP] = [1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-3, 1e-3, 1e-3, 1e-4, 1e-4];
 
-fn to_state(theta: &V9) -> BallState {
+fn to_state(theta: &VP) -> BallState {
     BallState::new(
         Vec3::new(theta[0], theta[1], theta[2]),
         Vec3::new(theta[3], theta[4], theta[5]),
         Vec3::new(theta[6], theta[7], theta[8]),
     )
+}
+
+fn to_scales(theta: &VP) -> FlightScales {
+    FlightScales { drag: theta[DRAG].exp(), lift: theta[LIFT].exp() }
+}
+
+/// The propagator of `prop` with θ's drag and lift multipliers.
+fn scaled(prop: &Propagator, theta: &VP) -> Propagator {
+    prop.with_scales(to_scales(theta))
 }
 
 /// Advances `s` from `from` to `to` by RK4 steps no longer than `prop.dt`.
@@ -108,11 +145,12 @@ fn fly_to(prop: &Propagator, s: &mut BallState, from: f64, to: f64) {
 }
 
 /// Calls `f(i, residual)` with each sample's residual p(tᵢ) − obsᵢ.
-fn residuals(prop: &Propagator, samples: &[Sample], theta: &V9, mut f: impl FnMut(usize, Vec3)) {
+fn residuals(prop: &Propagator, samples: &[Sample], theta: &VP, mut f: impl FnMut(usize, Vec3)) {
+    let prop = scaled(prop, theta);
     let mut s = to_state(theta);
     let mut t = samples[0].t;
     for (i, obs) in samples.iter().enumerate() {
-        fly_to(prop, &mut s, t, obs.t);
+        fly_to(&prop, &mut s, t, obs.t);
         t = obs.t;
         f(i, s.pos - obs.pos);
     }
@@ -122,65 +160,116 @@ fn huber(r: f64, k: f64) -> f64 {
     if r <= k { 1.0 } else { k / r }
 }
 
-/// Refines `init` (the state at `samples[0].t`) against `samples`
-/// (time-ordered, at least 4).
-pub fn refine(samples: &[Sample], init: &BallState, prop: &Propagator, cfg: &RefineConfig) -> Refined {
+/// The prior's information matrix at θ: the spin's Cauchy prior along
+/// `along` (re-weighted at θ), its weak isotropic prior, and the
+/// multipliers' Gaussian priors (about the calibration, ln 1 = 0).
+fn prior_at(theta: &VP, along: &Vec3, cfg: &RefineConfig, free: &[bool; NP]) -> MP {
+    let mut prior = MP::zeros();
+    let s = cfg.prior_along_velocity;
+    let a = along.dot(&Vec3::new(theta[6], theta[7], theta[8]));
+    let cauchy = 1.0 / (1.0 + (a / s) * (a / s));
+    let p_along = along * along.transpose() * (cauchy / (s * s));
+    let p_abs = nalgebra::Matrix3::identity() / (cfg.prior_spin * cfg.prior_spin);
+    prior.fixed_view_mut::<3, 3>(6, 6).copy_from(&(p_along + p_abs));
+    // Drag: Gaussian (the data pins it down). Lift: Cauchy, so a world
+    // whose lift lies far outside the calibrated curve (beyond its
+    // saturation) is followed instead of answered with an absurd spin.
+    for (k, sigma, heavy_tailed) in [(DRAG, cfg.variation.drag, false), (LIFT, cfg.variation.lift, true)] {
+        if free[k] {
+            let z = theta[k] / sigma;
+            let w = if heavy_tailed { 1.0 / (1.0 + z * z) } else { 1.0 };
+            prior[(k, k)] = w / (sigma * sigma);
+        }
+    }
+    prior
+}
+
+/// Refines `init` (the state at `samples[0].t`, flying with the calibrated
+/// model times `init_scales`) against `samples` (time-ordered, at least 4).
+pub fn refine(
+    samples: &[Sample],
+    init: &BallState,
+    init_scales: FlightScales,
+    prop: &Propagator,
+    cfg: &RefineConfig,
+) -> Refined {
     let n = samples.len();
     let sigma = cfg.noise.max(1e-5);
-    let mut theta = V9::from_iterator(init.pos.iter().chain(init.vel.iter()).chain(init.spin.iter()).copied());
+    let mut theta = VP::from_iterator(
+        init.pos
+            .iter()
+            .chain(init.vel.iter())
+            .chain(init.spin.iter())
+            .copied()
+            .chain([init_scales.drag.ln(), init_scales.lift.ln()]),
+    );
+    let mut free = [true; NP];
+    if cfg.fix_spin {
+        free[6..].iter_mut().for_each(|f| *f = false);
+    }
+    free[DRAG] &= cfg.variation.drag > 0.0;
+    free[LIFT] &= cfg.variation.lift > 0.0;
     let mut keep = vec![true; n];
 
     // The flight direction at the first sample, where the spin was imparted.
     let along = if init.vel.norm() > 1e-6 { init.vel.normalize() } else { Vec3::x() };
-    let mut prior = M9::zeros();
-    let p_along = along * along.transpose() / (cfg.prior_along_velocity * cfg.prior_along_velocity);
-    let p_abs = nalgebra::Matrix3::identity() / (cfg.prior_spin * cfg.prior_spin);
-    prior.fixed_view_mut::<3, 3>(6, 6).copy_from(&(p_along + p_abs));
 
-    let weights = |theta: &V9, keep: &[bool], out: &mut Vec<f64>| {
+    let weights = |theta: &VP, keep: &[bool], out: &mut Vec<f64>| {
         out.clear();
         out.resize(n, 0.0);
         residuals(prop, samples, theta, |i, r| {
             out[i] = if keep[i] { huber(r.norm() / sigma, cfg.huber_k) } else { 0.0 };
         });
     };
-    let cost = |theta: &V9, w: &[f64]| {
+    let cost = |theta: &VP, w: &[f64], prior: &MP| {
         let mut c = 0.0;
         residuals(prop, samples, theta, |i, r| c += w[i] * r.norm_squared() / (sigma * sigma));
-        c + (theta.fixed_rows::<3>(6).transpose() * prior.fixed_view::<3, 3>(6, 6) * theta.fixed_rows::<3>(6))[0]
+        // The multipliers' priors are about 0, the spin's about 0 too.
+        let mut centred = *theta;
+        centred.fixed_rows_mut::<6>(0).fill(0.0);
+        c + (centred.transpose() * prior * centred)[0]
     };
 
     let mut w = Vec::with_capacity(n);
     let mut lambda = 1e-3;
     let mut iterations = 0;
-    let mut info = M9::zeros();
+    let mut info = MP::zeros();
+    let mut prior = prior_at(&theta, &along, cfg, &free);
     for pass in 0..2 {
         weights(&theta, &keep, &mut w);
-        let mut current = cost(&theta, &w);
+        let mut current = cost(&theta, &w, &prior);
         for _ in 0..cfg.max_iterations {
             iterations += 1;
-            // Jacobian by forward differences, ten trajectories in lock step.
-            let mut states: [BallState; 10] = core::array::from_fn(|j| {
+            // Jacobian by forward differences, the perturbed trajectories in lock step.
+            let mut states = [BallState::new(Vec3::zeros(), Vec3::zeros(), Vec3::zeros()); NP + 1];
+            let mut props = [*prop; NP + 1];
+            for j in 0..=NP {
+                if j > 0 && !free[j - 1] {
+                    continue;
+                }
                 let mut th = theta;
                 if j > 0 {
                     th[j - 1] += STEPS[j - 1];
                 }
-                to_state(&th)
-            });
-            let mut jtj = M9::zeros();
-            let mut jtr = V9::zeros();
+                states[j] = to_state(&th);
+                props[j] = scaled(prop, &th);
+            }
+            let mut jtj = MP::zeros();
+            let mut jtr = VP::zeros();
             let mut t = samples[0].t;
             for (i, obs) in samples.iter().enumerate() {
-                for s in states.iter_mut() {
-                    fly_to(prop, s, t, obs.t);
+                for j in 0..=NP {
+                    if j == 0 || free[j - 1] {
+                        fly_to(&props[j], &mut states[j], t, obs.t);
+                    }
                 }
                 t = obs.t;
                 if w[i] == 0.0 {
                     continue;
                 }
                 let r = states[0].pos - obs.pos;
-                let mut jac = SMatrix::<f64, 3, 9>::zeros();
-                for j in 0..9 {
+                let mut jac = SMatrix::<f64, 3, NP>::zeros();
+                for j in (0..NP).filter(|&j| free[j]) {
                     jac.set_column(j, &((states[j + 1].pos - states[0].pos) / STEPS[j]));
                 }
                 let wi = w[i] / (sigma * sigma);
@@ -188,20 +277,20 @@ pub fn refine(samples: &[Sample], init: &BallState, prop: &Propagator, cfg: &Ref
                 jtr += jac.transpose() * r * wi;
             }
             info = jtj;
+            let mut centred = theta;
+            centred.fixed_rows_mut::<6>(0).fill(0.0);
             let mut normal = jtj + prior;
-            let mut grad = jtr + prior * theta;
-            if cfg.fix_spin {
-                for k in 6..9 {
-                    normal.row_mut(k).fill(0.0);
-                    normal.column_mut(k).fill(0.0);
-                    normal[(k, k)] = 1.0;
-                    grad[k] = 0.0;
-                }
+            let mut grad = jtr + prior * centred;
+            for k in (0..NP).filter(|&k| !free[k]) {
+                normal.row_mut(k).fill(0.0);
+                normal.column_mut(k).fill(0.0);
+                normal[(k, k)] = 1.0;
+                grad[k] = 0.0;
             }
             let mut improved = false;
             for _ in 0..10 {
                 let mut damped = normal;
-                for k in 0..9 {
+                for k in 0..NP {
                     damped[(k, k)] *= 1.0 + lambda;
                 }
                 let Some(chol) = damped.cholesky() else {
@@ -210,7 +299,7 @@ pub fn refine(samples: &[Sample], init: &BallState, prop: &Propagator, cfg: &Ref
                 };
                 let delta = -chol.solve(&grad);
                 let trial = theta + delta;
-                let c = cost(&trial, &w);
+                let c = cost(&trial, &w, &prior);
                 if c.is_finite() && c < current {
                     let rel = (current - c) / current.max(1e-300);
                     theta = trial;
@@ -220,9 +309,11 @@ pub fn refine(samples: &[Sample], init: &BallState, prop: &Propagator, cfg: &Ref
                 }
                 lambda *= 4.0;
             }
-            // Re-weight (Huber) around the new estimate.
+            // Re-weight (Huber on the residuals, Cauchy on the along-velocity
+            // spin) around the new estimate.
             weights(&theta, &keep, &mut w);
-            current = cost(&theta, &w);
+            prior = prior_at(&theta, &along, cfg, &free);
+            current = cost(&theta, &w, &prior);
             if !improved {
                 break;
             }
@@ -255,22 +346,55 @@ pub fn refine(samples: &[Sample], init: &BallState, prop: &Propagator, cfg: &Ref
     // Scale the information by the noise actually seen (per-axis σ̂ ≈ rms/√3).
     let sigma_hat = (rms / 3f64.sqrt()).max(1e-6);
     let scale = (sigma * sigma) / (sigma_hat * sigma_hat);
-    let cov = (info * scale + prior).try_inverse().unwrap_or_else(|| M9::from_diagonal_element(f64::INFINITY));
-    let spin_std = Vec3::new(cov[(6, 6)].sqrt(), cov[(7, 7)].sqrt(), cov[(8, 8)].sqrt());
-    // Data-only information about ω with position and velocity marginalised.
-    let i_xx = info.fixed_view::<6, 6>(0, 0).into_owned();
-    let i_xw = info.fixed_view::<6, 3>(0, 6).into_owned();
-    let i_ww = info.fixed_view::<3, 3>(6, 6).into_owned();
-    let (weak_axis, weak_axis_std) = match i_xx.try_inverse() {
-        Some(inv) => {
-            let schur = (i_ww - i_xw.transpose() * inv * i_xw) * scale;
-            let eig = nalgebra::SymmetricEigen::new(schur);
-            let k = eig.eigenvalues.imin();
-            let lam = eig.eigenvalues[k];
-            (eig.eigenvectors.column(k).into_owned(), if lam > 0.0 { lam.sqrt().recip() } else { f64::INFINITY })
-        }
-        None => (along, f64::INFINITY),
-    };
+    let mut posterior = info * scale + prior;
+    for k in (0..NP).filter(|&k| !free[k]) {
+        posterior.row_mut(k).fill(0.0);
+        posterior.column_mut(k).fill(0.0);
+        posterior[(k, k)] = 1.0;
+    }
+    let cov = posterior.try_inverse().unwrap_or_else(|| MP::from_diagonal_element(f64::INFINITY));
+    let std = |k: usize| if free[k] { cov[(k, k)].sqrt() } else { 0.0 };
+    let spin_std = if cfg.fix_spin { Vec3::zeros() } else { Vec3::new(std(6), std(7), std(8)) };
+    let scales = to_scales(&theta);
+    let scales_std = FlightScales { drag: scales.drag * std(DRAG), lift: scales.lift * std(LIFT) };
+    let (weak_axis, weak_axis_std) = weakest_spin_direction(&(info * scale), &free).unwrap_or((along, f64::INFINITY));
     let outliers = keep.iter().enumerate().filter(|(_, k)| !**k).map(|(i, _)| i).collect();
-    Refined { t0: samples[0].t, state: to_state(&theta), spin_std, weak_axis, weak_axis_std, rms, outliers, iterations }
+    Refined {
+        t0: samples[0].t,
+        state: to_state(&theta),
+        scales,
+        scales_std,
+        spin_std,
+        weak_axis,
+        weak_axis_std,
+        rms,
+        outliers,
+        iterations,
+    }
+}
+
+/// The data's information about ω with every other free parameter
+/// marginalised (Schur complement): its weakest direction and 1σ there.
+fn weakest_spin_direction(info: &MP, free: &[bool; NP]) -> Option<(Vec3, f64)> {
+    // Reorder: the eight other parameters, then the spin. Held ones count as known.
+    let others: [usize; 8] = [0, 1, 2, 3, 4, 5, DRAG, LIFT];
+    let mut i_xx = SMatrix::<f64, 8, 8>::zeros();
+    let mut i_xw = SMatrix::<f64, 8, 3>::zeros();
+    for (a, &p) in others.iter().enumerate() {
+        for (b, &q) in others.iter().enumerate() {
+            i_xx[(a, b)] = info[(p, q)];
+        }
+        if !free[p] {
+            i_xx[(a, a)] = 1.0;
+        }
+        for c in 0..3 {
+            i_xw[(a, c)] = if free[p] { info[(p, 6 + c)] } else { 0.0 };
+        }
+    }
+    let i_ww = info.fixed_view::<3, 3>(6, 6).into_owned();
+    let schur = i_ww - i_xw.transpose() * i_xx.try_inverse()? * i_xw;
+    let eig = nalgebra::SymmetricEigen::new(schur);
+    let k = eig.eigenvalues.imin();
+    let lam = eig.eigenvalues[k];
+    Some((eig.eigenvectors.column(k).into_owned(), if lam > 0.0 { lam.sqrt().recip() } else { f64::INFINITY }))
 }

@@ -29,6 +29,23 @@ pub enum LiftModel {
         /// Spin parameter at which C_M has fallen to half of `c_m`.
         s_half: f64,
     },
+    /// The saturating lift with a "lift crisis": a valley of C_L around
+    /// `s_valley`, C_M(S) = c_m / (1 + S / s_half) · (1 − depth ·
+    /// exp(−½((S − s_valley)/width)²)). The shape measured in flight for a
+    /// Nittaku ball at Re ≈ 9·10⁴ (DESIGN §3): lift nearly vanishes near
+    /// S ≈ 0.5. A world for the simulator; no estimator assumes it.
+    Crisis {
+        /// C_M at vanishing spin parameter.
+        c_m: f64,
+        /// Spin parameter at which the saturation halves C_M.
+        s_half: f64,
+        /// Spin parameter at the bottom of the valley.
+        s_valley: f64,
+        /// Share of the lift lost at the bottom (0–1).
+        depth: f64,
+        /// Width (standard deviation) of the valley in S.
+        width: f64,
+    },
 }
 
 impl LiftModel {
@@ -37,14 +54,45 @@ impl LiftModel {
         match *self {
             LiftModel::Constant { c_m } => c_m,
             LiftModel::Saturating { c_m, s_half } => c_m / (1.0 + s / s_half),
+            LiftModel::Crisis { c_m, s_half, s_valley, depth, width } => {
+                let z = (s - s_valley) / width;
+                c_m / (1.0 + s / s_half) * (1.0 - depth * (-0.5 * z * z).exp())
+            }
         }
+    }
+
+    /// The lift coefficient C_L(S) = C_M(S) · S.
+    pub fn c_l(&self, s: f64) -> f64 {
+        self.c_m(s) * s
     }
 
     /// C_M at vanishing spin.
     pub fn c_m0(&self) -> f64 {
         match *self {
-            LiftModel::Constant { c_m } | LiftModel::Saturating { c_m, .. } => c_m,
+            LiftModel::Constant { c_m } | LiftModel::Saturating { c_m, .. } | LiftModel::Crisis { c_m, .. } => c_m,
         }
+    }
+}
+
+/// Per-flight multipliers of the drag and the lift: a ball, the air and
+/// the day are not exactly the calibration (DESIGN §3). The refined fit
+/// estimates them from a flight; 1 is the calibration itself.
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub struct FlightScales {
+    /// Multiplier of k_D.
+    pub drag: f64,
+    /// Multiplier of the Magnus coefficient (the whole C_L(S) curve).
+    pub lift: f64,
+}
+
+impl FlightScales {
+    /// The calibration itself.
+    pub const ONE: FlightScales = FlightScales { drag: 1.0, lift: 1.0 };
+}
+
+impl Default for FlightScales {
+    fn default() -> Self {
+        FlightScales::ONE
     }
 }
 
@@ -72,6 +120,11 @@ impl FlightModel {
         }
     }
 
+    /// This model with its drag and lift multiplied by `scales`.
+    pub fn scaled(&self, scales: FlightScales) -> FlightModel {
+        FlightModel { k_d: self.k_d * scales.drag, lift_scale: self.lift_scale * scales.lift, ..*self }
+    }
+
     /// Drag coefficient k_D in 1/m.
     pub fn k_d(&self) -> f64 {
         self.k_d
@@ -86,7 +139,7 @@ impl FlightModel {
     pub fn k_m(&self, vel: &Vec3, spin: &Vec3) -> f64 {
         match self.lift {
             LiftModel::Constant { c_m } => self.lift_scale * c_m,
-            LiftModel::Saturating { .. } => {
+            LiftModel::Saturating { .. } | LiftModel::Crisis { .. } => {
                 let speed = vel.norm();
                 let s = if speed > 1e-9 { self.radius * spin.norm() / speed } else { 0.0 };
                 self.lift_scale * self.lift.c_m(s)
@@ -132,6 +185,8 @@ impl FlightModel {
                 let denom = 1.0 - self.radius * m / (speed.max(1e-9) * s_half);
                 (denom > 1e-3).then(|| spin_linear / denom)
             }
+            // Not monotonic in ω: no unique inverse.
+            LiftModel::Crisis { .. } => None,
         }
     }
 }

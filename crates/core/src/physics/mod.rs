@@ -10,8 +10,8 @@ pub mod propagate;
 pub mod table;
 
 pub use bounce::BounceModel;
-pub use flight::{FlightModel, LiftModel};
-pub use params::PhysicsParams;
+pub use flight::{FlightModel, FlightScales, LiftModel};
+pub use params::{FlightVariation, PhysicsParams};
 pub use propagate::{Event, Propagator, StopAt};
 pub use table::Table;
 

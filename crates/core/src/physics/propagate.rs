@@ -108,6 +108,11 @@ impl Propagator {
         Propagator { flight, bounce, table, dt: DEFAULT_STEP }
     }
 
+    /// This propagator with the flight's drag and lift multiplied by `scales`.
+    pub fn with_scales(&self, scales: super::FlightScales) -> Self {
+        Propagator { flight: self.flight.scaled(scales), ..*self }
+    }
+
     /// One RK4 step of length `h` (spin constant in flight).
     #[inline]
     pub(crate) fn rk4(&self, s: &BallState, h: f64) -> BallState {

@@ -67,7 +67,7 @@ impl CalibParam {
             (CalibParam::Restitution, _) => p.restitution,
             (CalibParam::Friction, _) => p.friction,
             (CalibParam::LiftCm, l) => l.c_m0(),
-            (CalibParam::LiftSHalf, LiftModel::Saturating { s_half, .. }) => s_half,
+            (CalibParam::LiftSHalf, LiftModel::Saturating { s_half, .. } | LiftModel::Crisis { s_half, .. }) => s_half,
             (CalibParam::LiftSHalf, LiftModel::Constant { .. }) => f64::NAN,
         }
     }
@@ -78,10 +78,12 @@ impl CalibParam {
             CalibParam::Restitution => p.restitution = v,
             CalibParam::Friction => p.friction = v,
             CalibParam::LiftCm => match &mut p.lift {
-                LiftModel::Constant { c_m } | LiftModel::Saturating { c_m, .. } => *c_m = v,
+                LiftModel::Constant { c_m } | LiftModel::Saturating { c_m, .. } | LiftModel::Crisis { c_m, .. } => {
+                    *c_m = v
+                }
             },
             CalibParam::LiftSHalf => {
-                if let LiftModel::Saturating { s_half, .. } = &mut p.lift {
+                if let LiftModel::Saturating { s_half, .. } | LiftModel::Crisis { s_half, .. } = &mut p.lift {
                     *s_half = v;
                 }
             }

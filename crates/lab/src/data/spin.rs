@@ -16,7 +16,7 @@ use topspin_core::fit::outlier::StartFilter;
 use topspin_core::fit::poly::Cubic;
 use topspin_core::fit::refine::{RefineConfig, refine};
 use topspin_core::fit::{FitConfig, Method, Sample, fit_trajectory};
-use topspin_core::physics::{BallState, PhysicsParams, Propagator, Table, Vec3};
+use topspin_core::physics::{BallState, FlightScales, FlightVariation, PhysicsParams, Propagator, Table, Vec3};
 
 use super::eval::{Prediction, Predictor};
 
@@ -59,12 +59,14 @@ pub struct FitPredictor {
     pub propagator: Propagator,
     /// Per-axis noise σ, m (outlier thresholds and weights).
     pub noise: f64,
+    /// The prior on one flight's drag and lift (`calib/physics.toml`).
+    pub variation: FlightVariation,
 }
 
 impl FitPredictor {
     pub fn new(kind: SpinFit, p: &PhysicsParams) -> Self {
         let propagator = Propagator::new(p.flight_model(), p.bounce_model(), Table::default());
-        FitPredictor { kind, propagator, noise: REAL_NOISE }
+        FitPredictor { kind, propagator, noise: REAL_NOISE, variation: p.variation }
     }
 
     /// The paper's method.
@@ -100,7 +102,7 @@ impl FitPredictor {
         let t0 = clean[0].t;
         let init = BallState::new(cubic.pos(t0), cubic.vel(t0), Vec3::zeros());
         let cfg = RefineConfig { noise: self.noise, fix_spin: true, ..RefineConfig::default() };
-        let r = refine(&clean, &init, &self.propagator, &cfg);
+        let r = refine(&clean, &init, FlightScales::ONE, &self.propagator, &cfg);
         let t_last = clean[clean.len() - 1].t;
         let state = self.propagator.fly(&r.state, t_last - r.t0);
         Some(Prediction { t: t_last, state })
@@ -115,7 +117,7 @@ impl Predictor for FitPredictor {
             SpinFit::Refined => Method::Refined,
             SpinFit::NoSpin => return self.fit_zero_spin(&samples),
         };
-        let cfg = FitConfig::new(method, HIT_PLANE_X).with_noise(self.noise);
+        let cfg = FitConfig::new(method, HIT_PLANE_X).with_noise(self.noise).with_variation(self.variation);
         let fit = fit_trajectory(&samples, &self.propagator, &cfg).ok()?;
         Some(Prediction { t: fit.t_last, state: fit.state_last })
     }

@@ -97,7 +97,8 @@ pub fn accuracy(cal: &Calibration, balls: &[SimBall], noise: f64) -> Vec<MethodR
     let mut rows = Vec::new();
     for window in [Window::PreBounce, Window::PreNet] {
         for method in [Method::Paper, Method::Refined] {
-            let cfg = FitConfig::new(method, cal.strike.hit_plane_x).with_noise(noise);
+            let cfg =
+                FitConfig::new(method, cal.strike.hit_plane_x).with_noise(noise).with_variation(cal.physics.variation);
             let mut cols: [Vec<f64>; 4] = Default::default();
             let mut failures = 0;
             for ball in balls {
@@ -128,7 +129,8 @@ pub fn outlier_experiment(cal: &Calibration, seed: u64, n: usize, noise: f64, fa
     let dirty_tracker = TrackerModel { false_starts, ..clean_tracker };
     let clean = simulate_set(cal, seed, n, &clean_tracker);
     let dirty = simulate_set(cal, seed, n, &dirty_tracker);
-    let cfg = FitConfig::new(Method::Refined, cal.strike.hit_plane_x).with_noise(noise);
+    let cfg =
+        FitConfig::new(Method::Refined, cal.strike.hit_plane_x).with_noise(noise).with_variation(cal.physics.variation);
     let prop = cal.propagator();
     let (mut exact, mut found, mut total) = (0usize, 0usize, 0usize);
     let (mut e_clean, mut e_dirty) = (Vec::new(), Vec::new());

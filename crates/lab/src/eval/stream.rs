@@ -140,7 +140,8 @@ pub fn evaluate(cal: &Calibration, setup: &StreamSetup) -> StreamReport {
     let ekf = run_estimator(cal, base, &balls, &launches);
     let window = run_estimator(cal, EstimatorConfig { spin_source: SpinSource::WindowFit, ..base }, &balls, &launches);
     let paper = FitConfig::new(Method::Paper, cal.strike.hit_plane_x).with_noise(noise);
-    let refined = FitConfig::new(Method::Refined, cal.strike.hit_plane_x).with_noise(noise);
+    let refined =
+        FitConfig::new(Method::Refined, cal.strike.hit_plane_x).with_noise(noise).with_variation(cal.physics.variation);
     let reachable: Vec<bool> = balls.iter().map(|b| topspin_sim::demo::reachable(cal, b)).collect();
     let tracked = (0..balls.len()).filter(|&k| reachable[k] && ekf.iter().any(|(b, _)| *b == k)).count();
 
