@@ -343,22 +343,14 @@ impl RobotFile {
     }
 
     /// The arm: its kinematics (chain and bat) and axis limits, in SI. For a
-    /// file that passed [`validate`](Self::validate) (entries off the
-    /// chain's shape are not read).
+    /// file that passed [`validate`](Self::validate) (panics on a chain
+    /// that validation rejects).
     pub fn arm(&self) -> Arm {
         let (r, j) = (&self.robot, &self.joints);
-        let o = &j.origin_xyz_m;
         let tool = Pose::from_xyz_abc([0.0, 0.0, r.tool_length_m], r.tool_abc_deg.map(f64::to_radians));
         Arm {
-            geometry: ArmGeometry {
-                shoulder_height: o[0][2],
-                shoulder_offset: o[1][0],
-                upper_arm: o[2][0],
-                elbow_offset: o[3][2],
-                forearm: o[4][0],
-                flange: o[5][0],
-                tool,
-            },
+            geometry: ArmGeometry::from_origins(&j.origin_xyz_m, tool)
+                .expect("joints.origin_xyz_m has the chain's shape (validated)"),
             limits: JointLimits {
                 min: j.min_deg.map(f64::to_radians),
                 max: j.max_deg.map(f64::to_radians),

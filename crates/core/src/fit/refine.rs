@@ -156,6 +156,29 @@ fn residuals(prop: &Propagator, samples: &[Sample], theta: &VP, mut f: impl FnMu
     }
 }
 
+/// θ less the priors' means: the spin's and the multipliers' priors are
+/// about 0 (ln 1), position and velocity have none.
+fn prior_offset(theta: &VP) -> VP {
+    let mut centred = *theta;
+    centred.fixed_rows_mut::<6>(0).fill(0.0);
+    centred
+}
+
+/// Pins the held parameters of a normal or information matrix (their rows
+/// and columns cleared, 1 on the diagonal) so it stays invertible.
+fn hold(m: &mut MP, free: &[bool; NP]) {
+    for k in (0..NP).filter(|&k| !free[k]) {
+        m.row_mut(k).fill(0.0);
+        m.column_mut(k).fill(0.0);
+        m[(k, k)] = 1.0;
+    }
+}
+
+/// The IRLS weight of a Cauchy prior at `z` widths from its centre.
+fn cauchy(z: f64) -> f64 {
+    1.0 / (1.0 + z * z)
+}
+
 fn huber(r: f64, k: f64) -> f64 {
     if r <= k { 1.0 } else { k / r }
 }
@@ -167,8 +190,7 @@ fn prior_at(theta: &VP, along: &Vec3, cfg: &RefineConfig, free: &[bool; NP]) -> 
     let mut prior = MP::zeros();
     let s = cfg.prior_along_velocity;
     let a = along.dot(&Vec3::new(theta[6], theta[7], theta[8]));
-    let cauchy = 1.0 / (1.0 + (a / s) * (a / s));
-    let p_along = along * along.transpose() * (cauchy / (s * s));
+    let p_along = along * along.transpose() * (cauchy(a / s) / (s * s));
     let p_abs = nalgebra::Matrix3::identity() / (cfg.prior_spin * cfg.prior_spin);
     prior.fixed_view_mut::<3, 3>(6, 6).copy_from(&(p_along + p_abs));
     // Drag: Gaussian (the data pins it down). Lift: Cauchy, so a world
@@ -176,8 +198,7 @@ fn prior_at(theta: &VP, along: &Vec3, cfg: &RefineConfig, free: &[bool; NP]) -> 
     // saturation) is followed instead of answered with an absurd spin.
     for (k, sigma, heavy_tailed) in [(DRAG, cfg.variation.drag, false), (LIFT, cfg.variation.lift, true)] {
         if free[k] {
-            let z = theta[k] / sigma;
-            let w = if heavy_tailed { 1.0 / (1.0 + z * z) } else { 1.0 };
+            let w = if heavy_tailed { cauchy(theta[k] / sigma) } else { 1.0 };
             prior[(k, k)] = w / (sigma * sigma);
         }
     }
@@ -224,9 +245,7 @@ pub fn refine(
     let cost = |theta: &VP, w: &[f64], prior: &MP| {
         let mut c = 0.0;
         residuals(prop, samples, theta, |i, r| c += w[i] * r.norm_squared() / (sigma * sigma));
-        // The multipliers' priors are about 0, the spin's about 0 too.
-        let mut centred = *theta;
-        centred.fixed_rows_mut::<6>(0).fill(0.0);
+        let centred = prior_offset(theta);
         c + (centred.transpose() * prior * centred)[0]
     };
 
@@ -277,14 +296,10 @@ pub fn refine(
                 jtr += jac.transpose() * r * wi;
             }
             info = jtj;
-            let mut centred = theta;
-            centred.fixed_rows_mut::<6>(0).fill(0.0);
             let mut normal = jtj + prior;
-            let mut grad = jtr + prior * centred;
+            let mut grad = jtr + prior * prior_offset(&theta);
+            hold(&mut normal, &free);
             for k in (0..NP).filter(|&k| !free[k]) {
-                normal.row_mut(k).fill(0.0);
-                normal.column_mut(k).fill(0.0);
-                normal[(k, k)] = 1.0;
                 grad[k] = 0.0;
             }
             let mut improved = false;
@@ -347,11 +362,7 @@ pub fn refine(
     let sigma_hat = (rms / 3f64.sqrt()).max(1e-6);
     let scale = (sigma * sigma) / (sigma_hat * sigma_hat);
     let mut posterior = info * scale + prior;
-    for k in (0..NP).filter(|&k| !free[k]) {
-        posterior.row_mut(k).fill(0.0);
-        posterior.column_mut(k).fill(0.0);
-        posterior[(k, k)] = 1.0;
-    }
+    hold(&mut posterior, &free);
     let cov = posterior.try_inverse().unwrap_or_else(|| MP::from_diagonal_element(f64::INFINITY));
     let std = |k: usize| if free[k] { cov[(k, k)].sqrt() } else { 0.0 };
     let spin_std = if cfg.fix_spin { Vec3::zeros() } else { Vec3::new(std(6), std(7), std(8)) };

@@ -175,9 +175,7 @@ pub fn fit_trajectory(samples: &[Sample], prop: &Propagator, cfg: &FitConfig) ->
         Method::Paper => {
             let t = pre[pre.len() - 1].t;
             let s = BallState::new(cubic.pos(t), cubic.vel(t), spin_paper);
-            let rms =
-                (pre.iter().map(|p| (cubic.pos(p.t) - p.pos).norm_squared()).sum::<f64>() / pre.len() as f64).sqrt();
-            (t, s, None, None, None, rms)
+            (t, s, None, None, None, cubic_rms(&cubic, pre, &[]))
         }
         Method::Refined => {
             let init = BallState::new(cubic.pos(pre[0].t), cubic.vel(pre[0].t), spin_paper);
@@ -249,12 +247,11 @@ pub fn fit_trajectory(samples: &[Sample], prop: &Propagator, cfg: &FitConfig) ->
 
 /// RMS of the cubic's 3D residual over the samples not in `outliers`.
 fn cubic_rms(cubic: &Cubic, samples: &[Sample], outliers: &[usize]) -> f64 {
-    let (mut sum, mut n) = (0.0, 0usize);
-    for (_, p) in samples.iter().enumerate().filter(|(i, _)| !outliers.contains(i)) {
-        sum += (cubic.pos(p.t) - p.pos).norm_squared();
-        n += 1;
-    }
-    (sum / n.max(1) as f64).sqrt()
+    let squares: Vec<f64> = (0..samples.len())
+        .filter(|i| !outliers.contains(i))
+        .map(|i| (cubic.pos(samples[i].t) - samples[i].pos).norm_squared())
+        .collect();
+    (squares.iter().sum::<f64>() / squares.len().max(1) as f64).sqrt()
 }
 
 /// Where a model that fits the window is trusted less than the cubic: the
@@ -262,7 +259,7 @@ fn cubic_rms(cubic: &Cubic, samples: &[Sample], outliers: &[usize]) -> f64 {
 /// right model fits about as well as the cubic (one parameter fewer:
 /// ratio ≈ 1, and above 1.5 only by chance at 3σ for a 50-sample window);
 /// the weight then grows with the misfit and reaches 1 at ratio 2.5.
-pub(crate) fn data_weight(model_rms: f64, cubic_rms: f64) -> f64 {
+fn data_weight(model_rms: f64, cubic_rms: f64) -> f64 {
     const TRUSTED: f64 = 1.5;
     const SPAN: f64 = 1.0;
     if !(cubic_rms > 0.0 && model_rms.is_finite()) {

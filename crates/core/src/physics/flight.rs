@@ -61,11 +61,6 @@ impl LiftModel {
         }
     }
 
-    /// The lift coefficient C_L(S) = C_M(S) · S.
-    pub fn c_l(&self, s: f64) -> f64 {
-        self.c_m(s) * s
-    }
-
     /// C_M at vanishing spin.
     pub fn c_m0(&self) -> f64 {
         match *self {
@@ -88,12 +83,6 @@ pub struct FlightScales {
 impl FlightScales {
     /// The calibration itself.
     pub const ONE: FlightScales = FlightScales { drag: 1.0, lift: 1.0 };
-}
-
-impl Default for FlightScales {
-    fn default() -> Self {
-        FlightScales::ONE
-    }
 }
 
 /// The ball's equation of motion with its coefficients precomputed.
