@@ -85,6 +85,14 @@ pub struct EvalStreamArgs {
     /// Share of frames lost.
     #[arg(long, default_value_t = 0.05)]
     pub dropout: f64,
+    /// Fly the balls in a world of `topspin eval worlds` (linear-weak,
+    /// linear-strong, saturating, crisis, heavy-air, other-table) instead of
+    /// the calibration's own.
+    #[arg(long, value_name = "NAME")]
+    pub world: Option<String>,
+    /// The estimator learns nothing across the session (drag, table).
+    #[arg(long)]
+    pub no_learning: bool,
 }
 
 pub fn run(cmd: EvalCommand) -> anyhow::Result<()> {
@@ -221,11 +229,21 @@ fn run_stream(a: EvalStreamArgs) -> anyhow::Result<()> {
     if !(0.0..1.0).contains(&a.dropout) {
         return Err(BadInput(format!("--dropout {} must be in [0, 1)", a.dropout)).into());
     }
+    let world = match &a.world {
+        Some(name) => Some(
+            topspin_sim::worlds::world_named(&cal, name)
+                .ok_or_else(|| BadInput(format!("--world {name}: no such world (see topspin eval worlds)")))?
+                .name,
+        ),
+        None => None,
+    };
     let setup = StreamSetup {
         balls: a.set.balls,
         seed: a.set.seed,
         noise_mm: a.noise_mm,
         dropout: a.dropout,
+        world,
+        learn: !a.no_learning,
         ..Default::default()
     };
     let report = evaluate(&cal, &setup);
@@ -254,5 +272,16 @@ fn run_stream(a: EvalStreamArgs) -> anyhow::Result<()> {
             r.source, r.hit_err_mm.median, r.hit_err_mm.p90, r.hit_dt_ms.median, r.hit_dt_ms.p90, r.missing
         );
     }
+    let l = &report.learned;
+    println!(
+        "\nWorld: {}. The EKF's session {}: drag × {:.3} of the calibration, table e {:.3}, μ {:.3} \
+         (from {} bounces).",
+        setup.world.unwrap_or("the calibration's own"),
+        if setup.learn { "learned" } else { "learned nothing (--no-learning)" },
+        l.drag_scale,
+        l.restitution,
+        l.friction,
+        l.bounces
+    );
     Ok(())
 }

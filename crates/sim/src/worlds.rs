@@ -47,7 +47,7 @@ const BALL_LIFT: (f64, f64) = (0.85, 1.15);
 /// Spin axes tipped towards the flight by up to this, degrees.
 const SKEW_DEG: f64 = 20.0;
 
-/// The five worlds of `topspin eval worlds`, on the cell of `cal`.
+/// The six worlds of `topspin eval worlds`, on the cell of `cal`.
 pub fn worlds(cal: &Calibration) -> Vec<World> {
     let base = &cal.physics;
     let world = |name, about, lift, c_d, e, mu| World {
@@ -93,7 +93,23 @@ pub fn worlds(cal: &Calibration) -> Vec<World> {
             0.90,
             0.25,
         ),
+        World {
+            ball_drag: (1.05, 1.25),
+            ..world(
+                "other-table",
+                "saturating lift, the calibrated C_D with every ball's drag ×1.05–1.25, e 0.92, μ 0.20",
+                sawicki,
+                base.drag_coefficient,
+                0.92,
+                0.20,
+            )
+        },
     ]
+}
+
+/// The world named `name`, if there is one.
+pub fn world_named(cal: &Calibration, name: &str) -> Option<World> {
+    worlds(cal).into_iter().find(|w| w.name == name)
 }
 
 /// Ball `k`'s own drag and lift multipliers in a world (a stream of its own).
@@ -107,18 +123,26 @@ fn ball_scales(world: &World, seed: u64, k: usize) -> FlightScales {
 /// `n` balls of `world` on the cell of `cal`, cycling through the nine
 /// settings, seen by `tracker`; balls its launcher cannot aim are skipped.
 pub fn simulate_world(world: &World, cal: &Calibration, seed: u64, n: usize, tracker: &TrackerModel) -> Vec<SimBall> {
+    (0..n).filter_map(|k| simulate_world_ball(world, cal, seed, k, tracker)).collect()
+}
+
+/// Ball `k` of `world` (setting k mod 9), or `None` where its launcher
+/// cannot aim it.
+pub fn simulate_world_ball(
+    world: &World,
+    cal: &Calibration,
+    seed: u64,
+    k: usize,
+    tracker: &TrackerModel,
+) -> Option<SimBall> {
     let prop = Propagator::new(world.physics.flight_model(), world.physics.bounce_model(), cal.table);
     let hit_x = cal.strike.hit_plane_x;
-    (0..n)
-        .filter_map(|k| {
-            let (mut rng_l, mut rng_t) = ball_rngs(seed, k);
-            let ball = prop.with_scales(ball_scales(world, seed, k));
-            let l = launch_with(Setting::ALL[k % 9], world.axis, &ball, hit_x, &mut rng_l).ok()?;
-            let truth = Truth::compute(&l, &ball, hit_x);
-            let observations = observe(&truth, &ball, tracker, 0.0, &mut rng_t);
-            Some(SimBall { index: k, truth, observations })
-        })
-        .collect()
+    let (mut rng_l, mut rng_t) = ball_rngs(seed, k);
+    let ball = prop.with_scales(ball_scales(world, seed, k));
+    let l = launch_with(Setting::ALL[k % 9], world.axis, &ball, hit_x, &mut rng_l).ok()?;
+    let truth = Truth::compute(&l, &ball, hit_x);
+    let observations = observe(&truth, &ball, tracker, 0.0, &mut rng_t);
+    Some(SimBall { index: k, truth, observations })
 }
 
 #[cfg(test)]

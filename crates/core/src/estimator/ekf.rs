@@ -75,6 +75,8 @@ pub struct Ekf {
     pub noise: EkfNoise,
     /// Bounces passed since initialisation.
     pub bounces: u32,
+    /// The state at the latest bounce's contact, just before the impact.
+    pub last_contact: Option<BallState>,
 }
 
 fn state_of(x: &V9) -> BallState {
@@ -94,7 +96,7 @@ impl Ekf {
             p[(k + 3, k + 3)] = vel_std * vel_std;
             p[(k + 6, k + 6)] = spin_std * spin_std;
         }
-        Ekf { t, x: vec_of(state), p, noise, bounces: 0 }
+        Ekf { t, x: vec_of(state), p, noise, bounces: 0, last_contact: None }
     }
 
     /// The state `x` as a ball state.
@@ -192,6 +194,7 @@ impl Ekf {
                         self.p[(k + 3, k + 3)] += self.noise.bounce_spin;
                     }
                     self.bounces += 1;
+                    self.last_contact = Some(before);
                     bounced = Some(tb);
                 }
                 Event::TimeLimit { .. } => break,

@@ -15,6 +15,7 @@
 //! candidate.
 
 pub mod ekf;
+pub mod session;
 pub mod stroke;
 
 use heapless::Vec as HVec;
@@ -23,10 +24,11 @@ use crate::calib::Calibration;
 use crate::fit::outlier::{START_WINDOW, StartFilter};
 use crate::fit::poly::Cubic;
 use crate::fit::{Prediction, Sample, magnus, predict};
-use crate::physics::{Propagator, Vec3};
+use crate::physics::{FlightScales, Propagator, Vec3};
 use crate::plan::StrikePlan;
 use crate::time::Instant;
 use ekf::{Ekf, EkfNoise, Update};
+use session::{LearnConfig, Session};
 pub use stroke::Withheld;
 
 /// Observations collected before a candidate becomes a track.
@@ -34,6 +36,9 @@ pub(crate) const ACQUIRE_LEN: usize = 8;
 /// Capacity of the pre-bounce window the spin is refitted over (≈ 1 s at
 /// 250 Hz: longer than any flight to the bounce).
 pub(crate) const WINDOW_CAP: usize = 256;
+/// Capacity of the post-bounce window the table is read from (≈ 0.5 s at
+/// 250 Hz; a longer stretch keeps its first samples).
+pub(crate) const AFTER_CAP: usize = 128;
 /// Rejections in a row after which a track is given up.
 pub(crate) const MAX_CONSECUTIVE_REJECTS: usize = 4;
 /// Capacity of the event list of one step.
@@ -67,6 +72,8 @@ pub struct EstimatorConfig {
     /// Prior uncertainty of the spin along the flight direction, rad/s
     /// (as [`crate::fit::refine::RefineConfig::prior_along_velocity`]).
     pub spin_prior_along_velocity: f64,
+    /// What the estimator learns across the session (drag, table).
+    pub learn: LearnConfig,
 }
 
 impl Default for EstimatorConfig {
@@ -79,6 +86,7 @@ impl Default for EstimatorConfig {
             start_filter: StartFilter::default(),
             initial_spin_std: 250.0,
             spin_prior_along_velocity: crate::fit::refine::RefineConfig::default().prior_along_velocity,
+            learn: LearnConfig::default(),
         }
     }
 }
@@ -209,12 +217,19 @@ impl StepOutput {
 struct Track {
     id: u32,
     ekf: Ekf,
+    /// The physics this ball flies with: the calibration with the
+    /// session's drag and table.
+    prop: Propagator,
     last_t: f64,
     rejects: HVec<Sample, MAX_CONSECUTIVE_REJECTS>,
     window: HVec<Sample, WINDOW_CAP>,
     /// The spin the ball flew with before its bounce (the Magnus spin the
     /// stroke answers, as in the paper); `None` before the bounce.
     spin_before_bounce: Option<Vec3>,
+    /// Time of the bounce, once confirmed.
+    bounce_t: Option<f64>,
+    /// Accepted observations after the bounce, short of the hitting plane.
+    after: HVec<Sample, AFTER_CAP>,
 }
 
 /// The estimator: at most one ball tracked at a time (the one coming at
@@ -229,6 +244,7 @@ pub struct Estimator {
     next_id: u32,
     plan_seq: u32,
     last_prediction: Option<Prediction>,
+    session: Session,
 }
 
 impl Estimator {
@@ -244,6 +260,34 @@ impl Estimator {
             next_id: 1,
             plan_seq: 0,
             last_prediction: None,
+            session: Session::new(&cal.physics.bounce_model()),
+        }
+    }
+
+    /// What the session has learned so far.
+    pub fn session(&self) -> &Session {
+        &self.session
+    }
+
+    /// The physics a new ball flies with: the calibration, with the
+    /// session's drag and table where learning is on.
+    fn session_propagator(&self) -> Propagator {
+        if !self.cfg.learn.enabled {
+            return self.prop;
+        }
+        let scales = FlightScales { drag: self.session.drag.value, lift: 1.0 };
+        Propagator { bounce: self.session.bounce_model(&self.prop.bounce), ..self.prop.with_scales(scales) }
+    }
+
+    /// Ends the track (if any) and learns the table from its bounce.
+    fn end_track(&mut self) {
+        let Some(track) = self.track.take() else { return };
+        if !self.cfg.learn.enabled || track.ekf.bounces != 1 {
+            return;
+        }
+        let (Some(before), Some(t_bounce)) = (track.ekf.last_contact, track.bounce_t) else { return };
+        if let Some(after) = session::velocity_at(&track.after, t_bounce, self.cfg.learn.min_samples) {
+            self.session.take_bounce(&before, &after, self.prop.bounce.radius, &self.cfg.learn);
         }
     }
 
@@ -264,7 +308,7 @@ impl Estimator {
             && t - track.last_t > self.cfg.silence
         {
             out.push(EstimatorEvent::Ended { trajectory: track.id, t, reason: EndReason::Silence });
-            self.track = None;
+            self.end_track();
         }
         if let Some(last) = self.candidate.last()
             && t - last.t > self.cfg.silence
@@ -350,8 +394,9 @@ impl Estimator {
         let spin_cov = (nalgebra::Matrix3::identity() - along) * self.cfg.initial_spin_std.powi(2)
             + along * self.cfg.spin_prior_along_velocity.powi(2);
         ekf.p.fixed_view_mut::<3, 3>(6, 6).copy_from(&spin_cov);
+        let prop = self.session_propagator();
         for s in &inliers {
-            ekf.predict(&self.prop, s.t);
+            ekf.predict(&prop, s.t);
             ekf.update(&s.pos);
         }
         let id = self.next_id;
@@ -360,7 +405,17 @@ impl Estimator {
         for s in &inliers {
             let _ = window.push(*s);
         }
-        self.track = Some(Track { id, ekf, last_t: last.t, rejects: HVec::new(), window, spin_before_bounce: None });
+        self.track = Some(Track {
+            id,
+            ekf,
+            prop,
+            last_t: last.t,
+            rejects: HVec::new(),
+            window,
+            spin_before_bounce: None,
+            bounce_t: None,
+            after: HVec::new(),
+        });
         out.push(EstimatorEvent::Started { trajectory: id, t: last.t, start_outliers: outliers.len() as u8 });
         self.plan(last.t, out);
     }
@@ -372,14 +427,27 @@ impl Estimator {
             return; // out of order or duplicate
         }
         let mut trial = track.ekf;
-        if let Some(tb) = trial.predict(&self.prop, sample.t) {
+        if let Some(tb) = trial.predict(&track.prop, sample.t) {
             // Only a tentative bounce until the observation is accepted.
             if let Update::Accepted { .. } = trial.update(&sample.pos) {
                 out.push(EstimatorEvent::Bounce { trajectory: track.id, t: tb });
-                track.spin_before_bounce.get_or_insert(track.ekf.state().spin);
+                if track.spin_before_bounce.is_none() {
+                    track.spin_before_bounce = Some(track.ekf.state().spin);
+                    track.bounce_t = Some(tb);
+                    if cfg.learn.enabled
+                        && let Some(drag) =
+                            session::drag_from_flight(&track.window, &self.prop.flight, cfg.learn.min_samples)
+                    {
+                        // The air of this session, this ball's flight included,
+                        // for the rest of this flight and the next balls.
+                        self.session.take_drag(drag, &cfg.learn);
+                        let scales = FlightScales { drag: self.session.drag.value, lift: 1.0 };
+                        track.prop.flight = self.prop.flight.scaled(scales);
+                    }
+                }
             }
             trial = track.ekf;
-            trial.predict(&self.prop, sample.t);
+            trial.predict(&track.prop, sample.t);
         }
         match trial.update(&sample.pos) {
             Update::Accepted { .. } => {
@@ -389,8 +457,11 @@ impl Estimator {
                 if track.spin_before_bounce.is_none() {
                     let _ = track.window.push(sample);
                     if cfg.spin_source == SpinSource::WindowFit {
-                        refit_spin(track, &self.prop);
+                        let prop = track.prop;
+                        refit_spin(track, &prop);
                     }
+                } else if track.ekf.bounces == 1 && sample.pos.x < self.strike.hit_plane_x {
+                    let _ = track.after.push(sample);
                 }
             }
             Update::Rejected { d2 } => {
@@ -398,7 +469,7 @@ impl Estimator {
                 if track.rejects.push(sample).is_err() || track.rejects.is_full() {
                     let id = track.id;
                     let rejected = track.rejects.clone();
-                    self.track = None;
+                    self.end_track();
                     out.push(EstimatorEvent::Ended { trajectory: id, t: sample.t, reason: EndReason::Lost });
                     self.candidate.clear();
                     for s in &rejected {
@@ -411,7 +482,7 @@ impl Estimator {
         if let Some(reason) = self.ended(sample.t) {
             let id = self.track.as_ref().map_or(0, |t| t.id);
             out.push(EstimatorEvent::Ended { trajectory: id, t: sample.t, reason });
-            self.track = None;
+            self.end_track();
             return;
         }
         self.plan(sample.t, out);
@@ -438,7 +509,7 @@ impl Estimator {
     fn plan(&mut self, t: f64, out: &mut StepOutput) {
         let Some(track) = &self.track else { return };
         let state = track.ekf.state();
-        let prediction = predict(&self.prop, &state, t, self.strike.hit_plane_x);
+        let prediction = predict(&track.prop, &state, t, self.strike.hit_plane_x);
         self.last_prediction = Some(prediction);
         let Some(hit) = prediction.hit else {
             out.push(EstimatorEvent::Withheld { trajectory: track.id, t, reason: Withheld::NoHit });

@@ -12,6 +12,7 @@ use topspin_core::physics::Vec3;
 use topspin_core::plan::StrikePlan;
 use topspin_core::stats::Summary;
 use topspin_core::time::Instant;
+use topspin_sim::worlds::{simulate_world_ball, world_named};
 use topspin_sim::{Setting, SimBall, TrackerModel, schedule, simulate_ball};
 
 /// How the stream is made.
@@ -25,11 +26,24 @@ pub struct StreamSetup {
     pub outliers_every: usize,
     /// Launch-to-launch gap, s.
     pub gap: f64,
+    /// A world of `topspin_sim::worlds` instead of the calibration's own.
+    pub world: Option<&'static str>,
+    /// The estimator learns drag and table across the session.
+    pub learn: bool,
 }
 
 impl Default for StreamSetup {
     fn default() -> Self {
-        StreamSetup { balls: 90, seed: 1, noise_mm: 2.0, dropout: 0.05, outliers_every: 4, gap: 1.0 }
+        StreamSetup {
+            balls: 90,
+            seed: 1,
+            noise_mm: 2.0,
+            dropout: 0.05,
+            outliers_every: 4,
+            gap: 1.0,
+            world: None,
+            learn: true,
+        }
     }
 }
 
@@ -55,6 +69,8 @@ pub struct StreamReport {
     pub reachable: usize,
     /// Reachable balls the estimator made at least one plan for.
     pub tracked: usize,
+    /// What the EKF learned over the session.
+    pub learned: SessionLearned,
     /// Errors of the latest plan made before the true net crossing.
     pub at_net: Vec<LeadRow>,
     pub by_lead: Vec<LeadRow>,
@@ -63,6 +79,7 @@ pub struct StreamReport {
 /// The simulated balls and their launch times on one clock.
 pub fn simulate_stream(cal: &Calibration, setup: &StreamSetup) -> (Vec<SimBall>, Vec<f64>) {
     let prop = cal.propagator();
+    let world = setup.world.and_then(|name| world_named(cal, name));
     let base = TrackerModel { noise_sigma: setup.noise_mm * 1e-3, dropout: setup.dropout, ..TrackerModel::default() };
     let balls: Vec<SimBall> = (0..setup.balls)
         .filter_map(|k| {
@@ -71,7 +88,10 @@ pub fn simulate_stream(cal: &Calibration, setup: &StreamSetup) -> (Vec<SimBall>,
             } else {
                 base
             };
-            simulate_ball(setup.seed, k, Setting::ALL[k % 9], &prop, cal.strike.hit_plane_x, &tracker).ok()
+            match &world {
+                Some(w) => simulate_world_ball(w, cal, setup.seed, k, &tracker),
+                None => simulate_ball(setup.seed, k, Setting::ALL[k % 9], &prop, cal.strike.hit_plane_x, &tracker).ok(),
+            }
         })
         .collect();
     let ends: Vec<f64> = balls.iter().map(|b| b.observations.last().map_or(0.0, |o| o.t)).collect();
@@ -80,13 +100,14 @@ pub fn simulate_stream(cal: &Calibration, setup: &StreamSetup) -> (Vec<SimBall>,
     (balls, launches)
 }
 
-/// Every plan the estimator made, with the ball it was made during.
+/// Every plan the estimator made, with the ball it was made during, and
+/// what it learned over the session.
 pub(crate) fn run_estimator(
     cal: &Calibration,
     cfg: EstimatorConfig,
     balls: &[SimBall],
     launches: &[f64],
-) -> Vec<(usize, StrikePlan)> {
+) -> (Vec<(usize, StrikePlan)>, SessionLearned) {
     let mut est = Estimator::new(cal, cfg);
     let mut plans = Vec::new();
     for (k, (ball, &t0)) in balls.iter().zip(launches).enumerate() {
@@ -96,7 +117,27 @@ pub(crate) fn run_estimator(
             }
         }
     }
-    plans
+    let s = est.session();
+    let learned = SessionLearned {
+        drag_scale: s.drag.value,
+        restitution: s.restitution.value,
+        friction: s.friction.value,
+        bounces: s.restitution.count,
+    };
+    (plans, learned)
+}
+
+/// What the EKF's session learned by its end.
+#[derive(Copy, Clone, Debug, Serialize)]
+pub struct SessionLearned {
+    /// Multiplier of the calibrated drag.
+    pub drag_scale: f64,
+    /// Table restitution e.
+    pub restitution: f64,
+    /// Ball–table friction μ.
+    pub friction: f64,
+    /// Bounces it learned the table from.
+    pub bounces: u32,
 }
 
 fn v3(a: [f64; 3]) -> Vec3 {
@@ -136,9 +177,11 @@ pub(crate) const LEADS: [f64; 6] = [0.5, 0.4, 0.3, 0.2, 0.15, 0.1];
 pub fn evaluate(cal: &Calibration, setup: &StreamSetup) -> StreamReport {
     let (balls, launches) = simulate_stream(cal, setup);
     let noise = setup.noise_mm * 1e-3;
-    let base = EstimatorConfig::default().with_noise(noise);
-    let ekf = run_estimator(cal, base, &balls, &launches);
-    let window = run_estimator(cal, EstimatorConfig { spin_source: SpinSource::WindowFit, ..base }, &balls, &launches);
+    let mut base = EstimatorConfig::default().with_noise(noise);
+    base.learn.enabled = setup.learn;
+    let (ekf, learned) = run_estimator(cal, base, &balls, &launches);
+    let (window, _) =
+        run_estimator(cal, EstimatorConfig { spin_source: SpinSource::WindowFit, ..base }, &balls, &launches);
     let paper = FitConfig::new(Method::Paper, cal.strike.hit_plane_x).with_noise(noise);
     let refined =
         FitConfig::new(Method::Refined, cal.strike.hit_plane_x).with_noise(noise).with_variation(cal.physics.variation);
@@ -170,5 +213,5 @@ pub fn evaluate(cal: &Calibration, setup: &StreamSetup) -> StreamReport {
         by_lead.extend(rows(lead, at(&|b: &SimBall| b.truth.hit.as_ref().map(|h| h.t - lead))));
     }
     let reachable = reachable.iter().filter(|r| **r).count();
-    StreamReport { setup: *setup, balls: balls.len(), reachable, tracked, at_net, by_lead }
+    StreamReport { setup: *setup, balls: balls.len(), reachable, tracked, learned, at_net, by_lead }
 }

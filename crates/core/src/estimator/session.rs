@@ -1,0 +1,220 @@
+//! What the estimator learns across a session (issue 15): the things that
+//! do not change from one ball to the next — the table's restitution e and
+//! friction μ, read from the bounces it sees, and the air's drag, read from
+//! each flight's deceleration. Bounded (each value stays inside a plausible
+//! range), robust to a bad ball (one ball moves a value by at most a fixed
+//! step), with a fixed memory, and reset with the estimator (a restart or a
+//! new configuration).
+//!
+//! The measurements are closed-form and bounded in work (one cubic over a
+//! window), made once per ball: the drag when the ball bounces, the table
+//! when its track ends.
+
+use crate::fit::Sample;
+use crate::fit::poly::Cubic;
+use crate::physics::{BallState, BounceModel, FlightModel, Vec3};
+
+/// Settings of the session learning.
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub struct LearnConfig {
+    /// Learn at all (off: every ball flies with the calibration).
+    pub enabled: bool,
+    /// Balls after which a new one counts with weight 1/`memory`.
+    pub memory: u32,
+    /// Fewest samples a measurement is made from.
+    pub min_samples: usize,
+}
+
+impl Default for LearnConfig {
+    fn default() -> Self {
+        LearnConfig { enabled: true, memory: 8, min_samples: 12 }
+    }
+}
+
+/// One learned value: a running mean whose steps are clipped (a bad ball
+/// moves it at most `max_step / n`) and whose result stays within bounds.
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub struct Learned {
+    /// The current value.
+    pub value: f64,
+    /// Measurements taken in.
+    pub count: u32,
+    bounds: (f64, f64),
+    max_step: f64,
+}
+
+impl Learned {
+    fn new(value: f64, bounds: (f64, f64), max_step: f64) -> Self {
+        Learned { value, count: 0, bounds, max_step }
+    }
+
+    fn take(&mut self, measured: f64, memory: u32) {
+        if !measured.is_finite() {
+            return;
+        }
+        self.count = self.count.saturating_add(1);
+        let weight = 1.0 / f64::from(self.count.min(memory) + 1);
+        let step = (measured - self.value).clamp(-self.max_step, self.max_step);
+        self.value = (self.value + weight * step).clamp(self.bounds.0, self.bounds.1);
+    }
+}
+
+/// The session's learned drag multiplier and table.
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub struct Session {
+    /// Multiplier of the calibrated drag (C_D 0.40–0.55 spans ×0.85–1.25
+    /// about 0.447; bounded ×0.6–1.8).
+    pub drag: Learned,
+    /// Table restitution e (bounded 0.7–0.99).
+    pub restitution: Learned,
+    /// Ball–table friction μ (bounded 0.05–0.6).
+    pub friction: Learned,
+}
+
+impl Session {
+    /// A session that starts from the calibration's table.
+    pub fn new(bounce: &BounceModel) -> Self {
+        Session {
+            drag: Learned::new(1.0, (0.6, 1.8), 0.3),
+            restitution: Learned::new(bounce.restitution, (0.7, 0.99), 0.08),
+            friction: Learned::new(bounce.friction, (0.05, 0.6), 0.1),
+        }
+    }
+
+    /// The table as learned so far.
+    pub fn bounce_model(&self, calibrated: &BounceModel) -> BounceModel {
+        BounceModel::new(self.restitution.value, self.friction.value, calibrated.radius)
+    }
+
+    /// Takes one ball's drag multiplier.
+    pub(crate) fn take_drag(&mut self, measured: f64, cfg: &LearnConfig) {
+        self.drag.take(measured, cfg.memory);
+    }
+
+    /// Takes one ball's bounce: `before` at contact (from the filter), the
+    /// velocity just after it (from the samples after the bounce).
+    pub(crate) fn take_bounce(&mut self, before: &BallState, after_vel: &Vec3, radius: f64, cfg: &LearnConfig) {
+        let Some((e, mu)) = table_from_bounce(before, after_vel, radius) else { return };
+        self.restitution.take(e, cfg.memory);
+        if let Some(mu) = mu {
+            self.friction.take(mu, cfg.memory);
+        }
+    }
+}
+
+/// The drag multiplier that explains the deceleration along the flight of
+/// `samples` (pure flight, time-ordered): along the velocity the Magnus
+/// force vanishes, so P″·v̂ = −k_D·s·‖P′‖² − g·v̂_z, solved for s by least
+/// squares over the samples with the cubic's P′ and P″ (the paper's
+/// construction, for the drag).
+pub(crate) fn drag_from_flight(samples: &[Sample], flight: &FlightModel, min_samples: usize) -> Option<f64> {
+    if samples.len() < min_samples {
+        return None;
+    }
+    let cubic = Cubic::fit(samples.iter())?;
+    let (mut xy, mut xx) = (0.0, 0.0);
+    for s in samples {
+        let v = cubic.vel(s.t);
+        let speed = v.norm();
+        if speed < 1.0 {
+            continue;
+        }
+        let along = v / speed;
+        let x = flight.k_d() * speed * speed;
+        let y = -(cubic.acc(s.t).dot(&along) + flight.gravity() * along.z);
+        xy += x * y;
+        xx += x * x;
+    }
+    (xx > 0.0).then(|| xy / xx).filter(|s| s.is_finite() && *s > 0.0)
+}
+
+/// The velocity at `t` of a cubic through `samples` (after a bounce).
+pub(crate) fn velocity_at(samples: &[Sample], t: f64, min_samples: usize) -> Option<Vec3> {
+    if samples.len() < min_samples {
+        return None;
+    }
+    Cubic::fit(samples.iter()).map(|c| c.vel(t))
+}
+
+/// e and (where the contact slid) μ of one bounce, inverting the bounce
+/// model (DESIGN §3): v_z⁺ = −e v_z⁻; the tangential velocity changes by
+/// −α·v_T with v_T the slip at the contact and α = μ(1+e)|v_z⁻|/‖v_T‖ while
+/// sliding (α < 2/5). μ is `None` where the ball rolled off or barely slid.
+pub(crate) fn table_from_bounce(before: &BallState, after_vel: &Vec3, radius: f64) -> Option<(f64, Option<f64>)> {
+    let (v, w) = (before.vel, before.spin);
+    if v.z > -0.5 {
+        return None;
+    }
+    let e = -after_vel.z / v.z;
+    let slip = nalgebra::Vector2::new(v.x - radius * w.y, v.y + radius * w.x);
+    let change = nalgebra::Vector2::new(after_vel.x - v.x, after_vel.y - v.y);
+    let slip_speed = slip.norm();
+    let mu = (slip_speed > 0.5)
+        .then(|| -change.dot(&slip) / (slip_speed * slip_speed))
+        .filter(|alpha| *alpha > 0.02 && *alpha < 0.3)
+        .map(|alpha| alpha * slip_speed / ((1.0 + e) * v.z.abs()));
+    Some((e, mu))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::calib::Calibration;
+    use crate::physics::{Event, FlightScales, StopAt};
+
+    #[test]
+    fn one_bounce_gives_back_e_and_mu() {
+        let b = BounceModel::new(0.9, 0.2, 0.02);
+        // Sliding: backspin.
+        let before = BallState::new(Vec3::zeros(), Vec3::new(5.0, 0.3, -3.0), Vec3::new(0.0, -200.0, 0.0));
+        let (e, mu) = table_from_bounce(&before, &b.apply(&before).vel, 0.02).unwrap();
+        assert!((e - 0.9).abs() < 1e-12 && (mu.unwrap() - 0.2).abs() < 1e-12, "{e} {mu:?}");
+        // Rolling (topspin matching the speed): μ not measurable.
+        let rolling = BallState::new(Vec3::zeros(), Vec3::new(5.0, 0.0, -3.0), Vec3::new(0.0, 250.0, 0.0));
+        let after = b.apply(&rolling).vel;
+        assert_eq!(table_from_bounce(&rolling, &after, 0.02).unwrap().1, None);
+        // Not falling into the table: nothing.
+        assert_eq!(table_from_bounce(&BallState { vel: Vec3::new(5.0, 0.0, 0.1), ..rolling }, &after, 0.02), None);
+    }
+
+    #[test]
+    fn drag_is_read_from_the_deceleration() {
+        let cal = Calibration::default_cell();
+        let prop = cal.propagator().with_scales(FlightScales { drag: 1.3, lift: 1.0 });
+        let mut s = BallState::new(Vec3::new(-1.5, 0.0, 0.3), Vec3::new(7.0, 0.0, 1.5), Vec3::new(0.0, 300.0, 20.0));
+        let mut t = 0.0;
+        let mut samples = Vec::new();
+        while t < 0.25 {
+            samples.push(Sample::new(t, s.pos));
+            let next = StopAt::time(t + 1.0 / 150.0);
+            assert!(matches!(prop.advance(&mut s, &mut t, &next), Event::TimeLimit { .. }));
+        }
+        let d = drag_from_flight(&samples, &cal.propagator().flight, 12).unwrap();
+        assert!((d - 1.3).abs() < 0.03, "{d}");
+        assert_eq!(drag_from_flight(&samples[..5], &cal.propagator().flight, 12), None);
+    }
+
+    #[test]
+    fn learning_is_bounded_and_a_bad_ball_moves_it_little() {
+        let cfg = LearnConfig::default();
+        let mut s = Session::new(&BounceModel::new(0.95, 0.14, 0.02));
+        let before = BallState::new(Vec3::zeros(), Vec3::new(5.0, 0.0, -3.0), Vec3::new(0.0, -150.0, 0.0));
+        let after = BounceModel::new(0.88, 0.3, 0.02).apply(&before).vel;
+        for _ in 0..40 {
+            s.take_bounce(&before, &after, 0.02, &cfg);
+        }
+        assert!((s.restitution.value - 0.88).abs() < 0.005 && (s.friction.value - 0.3).abs() < 0.01, "{s:?}");
+        for _ in 0..20 {
+            s.take_drag(1.1, &cfg);
+        }
+        let before = s;
+        s.take_drag(50.0, &cfg);
+        s.restitution.take(f64::NAN, cfg.memory);
+        assert!(s.drag.value - before.drag.value <= 0.3 / 9.0 + 1e-12);
+        assert_eq!(s.restitution, before.restitution);
+        for _ in 0..100 {
+            s.take_drag(50.0, &cfg);
+        }
+        assert_eq!(s.drag.value, 1.8);
+    }
+}
