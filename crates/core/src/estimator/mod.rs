@@ -67,7 +67,10 @@ pub struct EstimatorConfig {
     pub noise: EkfNoise,
     /// The paper's start filter applied to a candidate's observations.
     pub start_filter: StartFilter,
-    /// Initial spin uncertainty of a new track, rad/s.
+    /// Initial spin uncertainty of a new track, rad/s (600: real balls
+    /// reach 100–175 rps, and under a saturating lift the first samples
+    /// say little about the spin's size, so a narrower start holds the
+    /// filter low on fast topspin).
     pub initial_spin_std: f64,
     /// Prior uncertainty of the spin along the flight direction, rad/s
     /// (as [`crate::fit::refine::RefineConfig::prior_along_velocity`]).
@@ -84,7 +87,7 @@ impl Default for EstimatorConfig {
             spin_source: SpinSource::Ekf,
             noise: EkfNoise::default(),
             start_filter: StartFilter::default(),
-            initial_spin_std: 250.0,
+            initial_spin_std: 600.0,
             spin_prior_along_velocity: crate::fit::refine::RefineConfig::default().prior_along_velocity,
             learn: LearnConfig::default(),
         }
@@ -375,8 +378,11 @@ impl Estimator {
             out.push(EstimatorEvent::Discarded { t: last.t });
             return;
         }
-        let spin = magnus::solve(&cubic, inliers.iter().map(|s| s.t), &self.prop.flight)
-            .map(|m| m.spin_linear)
+        // The linear solve assumes k_M(0); a saturating lift needs more spin
+        // for the same bend (as the batch fit and `refit_spin` map it).
+        let flight = &self.prop.flight;
+        let spin = magnus::solve(&cubic, inliers.iter().map(|s| s.t), flight)
+            .map(|m| flight.spin_from_linear(&m.spin_linear, m.mean_speed).unwrap_or(m.spin_linear))
             .filter(|w| w.norm() < 1500.0)
             .unwrap_or_else(Vec3::zeros);
         // A trajectory cannot see the spin along the flight direction: start

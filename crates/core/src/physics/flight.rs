@@ -136,6 +136,26 @@ impl FlightModel {
         }
     }
 
+    /// k_M at `vel`, `spin` with its gradients with respect to the
+    /// velocity and the spin (zero for a constant lift): what a Jacobian
+    /// of the Magnus acceleration k_M(S)·(ω × v) needs beyond k_M itself.
+    pub fn k_m_with_gradients(&self, vel: &Vec3, spin: &Vec3) -> (f64, Vec3, Vec3) {
+        let k_m = self.k_m(vel, spin);
+        let (speed, w) = (vel.norm(), spin.norm());
+        if matches!(self.lift, LiftModel::Constant { .. }) || speed < 1e-9 || w < 1e-9 {
+            return (k_m, Vec3::zeros(), Vec3::zeros());
+        }
+        let s = self.radius * w / speed;
+        // dC_M/dS by a central difference (exact enough for a Jacobian).
+        let h = 1e-6 * (1.0 + s);
+        let lo = (s - h).max(0.0);
+        let dk_ds = self.lift_scale * (self.lift.c_m(s + h) - self.lift.c_m(lo)) / (s + h - lo);
+        // S = r‖ω‖/‖v‖: ∂S/∂ω = r ω̂/‖v‖, ∂S/∂v = −S v̂/‖v‖.
+        let d_dw = spin * (dk_ds * self.radius / (w * speed));
+        let d_dv = vel * (-dk_ds * s / (speed * speed));
+        (k_m, d_dv, d_dw)
+    }
+
     /// The lift model C_M(S).
     pub fn lift(&self) -> LiftModel {
         self.lift
@@ -200,6 +220,25 @@ mod tests {
         let top = m.accel(&v, &Vec3::new(0.0, 300.0, 0.0));
         let back = m.accel(&v, &Vec3::new(0.0, -300.0, 0.0));
         assert!(top.z < -9.81 && back.z > -9.81);
+    }
+
+    #[test]
+    fn k_m_gradients_match_finite_differences() {
+        let mut p = PhysicsParams::paper();
+        p.lift = LiftModel::Saturating { c_m: 1.0, s_half: 0.5 };
+        let m = p.flight_model();
+        let v = Vec3::new(6.0, 0.5, 1.0);
+        let w = Vec3::new(20.0, -300.0, 80.0);
+        let (k, dv, dw) = m.k_m_with_gradients(&v, &w);
+        assert_eq!(k, m.k_m(&v, &w));
+        for a in 0..3 {
+            let e = Vec3::ith(a, 1e-5);
+            let num_v = (m.k_m(&(v + e), &w) - m.k_m(&(v - e), &w)) / 2e-5;
+            let num_w = (m.k_m(&v, &(w + e)) - m.k_m(&v, &(w - e))) / 2e-5;
+            assert!((num_v - dv[a]).abs() < 1e-9 && (num_w - dw[a]).abs() < 1e-11, "{a}: {num_v} {dv} {num_w} {dw}");
+        }
+        let (_, dv0, dw0) = PhysicsParams::paper().flight_model().k_m_with_gradients(&v, &w);
+        assert_eq!((dv0, dw0), (Vec3::zeros(), Vec3::zeros()));
     }
 
     #[test]
