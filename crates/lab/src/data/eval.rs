@@ -15,7 +15,7 @@
 //! Results are reported per set (mean, median, std, count) with the reasons
 //! for every skipped trajectory counted.
 
-use topspin_core::physics::{BallState, Event, Propagator, StopAt, Vec3};
+use topspin_core::physics::{BallState, Event, FlightScales, Propagator, StopAt, Vec3};
 
 use super::frame::{BounceSearch, DetectedBounce, LabToTable, detect_bounces};
 use super::mpi::{RealTrajectory, SETS, median};
@@ -28,6 +28,16 @@ pub struct Prediction {
     pub t: f64,
     /// Position, velocity and spin at `t`, table frame.
     pub state: BallState,
+    /// The drag and lift the state flies with, as multipliers of the
+    /// calibration (a refined fit reads them per flight).
+    pub scales: FlightScales,
+}
+
+impl Prediction {
+    /// A state that flies with the calibration itself.
+    pub fn calibrated(t: f64, state: BallState) -> Self {
+        Prediction { t, state, scales: FlightScales::ONE }
+    }
 }
 
 /// Anything that turns observations (table frame, increasing t) into a
@@ -51,7 +61,7 @@ pub struct CubicBaseline;
 impl Predictor for CubicBaseline {
     fn predict(&self, samples: &[(f64, Vec3)]) -> Option<Prediction> {
         let (pos, vel, t) = cubic_state(samples)?;
-        Some(Prediction { t, state: BallState::new(pos, vel, Vec3::zeros()) })
+        Some(Prediction::calibrated(t, BallState::new(pos, vel, Vec3::zeros())))
     }
 }
 
@@ -257,6 +267,7 @@ pub(crate) fn interpolate(s: &[(f64, Vec3)], t: f64, max_gap: f64) -> Option<Vec
 
 /// The first table contact of `pred` under `prop`.
 pub(crate) fn predicted_bounce(prop: &Propagator, pred: &Prediction, max_flight: f64) -> Option<(f64, Vec3)> {
+    let prop = prop.with_scales(pred.scales);
     let mut s = pred.state;
     let mut t = pred.t;
     let stop = StopAt::time(pred.t + max_flight);
@@ -268,6 +279,7 @@ pub(crate) fn predicted_bounce(prop: &Propagator, pred: &Prediction, max_flight:
 
 /// The position of `pred` at `t_end` under `prop`, through bounces.
 pub(crate) fn predicted_position(prop: &Propagator, pred: &Prediction, t_end: f64) -> Option<Vec3> {
+    let prop = prop.with_scales(pred.scales);
     let mut s = pred.state;
     let mut t = pred.t;
     let stop = StopAt::time(t_end);
@@ -424,7 +436,7 @@ mod tests {
         let samples: Vec<(f64, Vec3)> = (0..140)
             .map(|k| {
                 let t = k as f64 / 180.0;
-                let pred = Prediction { t: 0.0, state: s0 };
+                let pred = Prediction::calibrated(0.0, s0);
                 (t, predicted_position(&prop, &pred, t).unwrap())
             })
             .collect();

@@ -105,7 +105,7 @@ impl FitPredictor {
         let r = refine(&clean, &init, FlightScales::ONE, &self.propagator, &cfg);
         let t_last = clean[clean.len() - 1].t;
         let state = self.propagator.fly(&r.state, t_last - r.t0);
-        Some(Prediction { t: t_last, state })
+        Some(Prediction::calibrated(t_last, state))
     }
 }
 
@@ -119,7 +119,8 @@ impl Predictor for FitPredictor {
         };
         let cfg = FitConfig::new(method, HIT_PLANE_X).with_noise(self.noise).with_variation(self.variation);
         let fit = fit_trajectory(&samples, &self.propagator, &cfg).ok()?;
-        Some(Prediction { t: fit.t_last, state: fit.state_last })
+        let scales = fit.scales.map_or(FlightScales::ONE, |(s, _)| s);
+        Some(Prediction { t: fit.t_last, state: fit.state_last, scales })
     }
 }
 
@@ -132,7 +133,7 @@ mod tests {
     fn flight(p: &PhysicsParams, spin: Vec3) -> Vec<(f64, Vec3)> {
         let prop = Propagator::new(p.flight_model(), p.bounce_model(), Table::default());
         let s0 = BallState::new(Vec3::new(-1.35, 0.0, 0.35), Vec3::new(5.5, 0.0, 1.2), spin);
-        let start = Prediction { t: 0.0, state: s0 };
+        let start = Prediction::calibrated(0.0, s0);
         (0..45)
             .map(|k| {
                 let t = k as f64 / 180.0;

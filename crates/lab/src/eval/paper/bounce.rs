@@ -86,7 +86,7 @@ impl Predictor for KalmanNoSpin {
             ekf.update(p);
         }
         let state = ekf.state();
-        state.is_finite().then_some(Prediction { t: ekf.t, state })
+        state.is_finite().then_some(Prediction::calibrated(ekf.t, state))
     }
 }
 
