@@ -126,10 +126,15 @@ impl FlightModel {
 
     /// Magnus coefficient k_M at the given velocity and spin.
     pub fn k_m(&self, vel: &Vec3, spin: &Vec3) -> f64 {
+        self.k_m_at(vel.norm(), spin)
+    }
+
+    /// k_M at speed `speed` (‖v‖, already known to the caller) and `spin`.
+    #[inline]
+    fn k_m_at(&self, speed: f64, spin: &Vec3) -> f64 {
         match self.lift {
             LiftModel::Constant { c_m } => self.lift_scale * c_m,
             LiftModel::Saturating { .. } | LiftModel::Crisis { .. } => {
-                let speed = vel.norm();
                 let s = if speed > 1e-9 { self.radius * spin.norm() / speed } else { 0.0 };
                 self.lift_scale * self.lift.c_m(s)
             }
@@ -175,7 +180,7 @@ impl FlightModel {
     #[inline]
     pub fn accel(&self, vel: &Vec3, spin: &Vec3) -> Vec3 {
         let speed = vel.norm();
-        let mut a = vel * (-self.k_d * speed) + spin.cross(vel) * self.k_m(vel, spin);
+        let mut a = vel * (-self.k_d * speed) + spin.cross(vel) * self.k_m_at(speed, spin);
         a.z -= self.gravity;
         a
     }
