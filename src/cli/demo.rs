@@ -236,11 +236,23 @@ pub fn table(r: &DemoReport) -> String {
             i.clock_jumps
         );
     }
+    let rb = &r.robot;
     let _ = writeln!(
         out,
-        "mock KR C4: {} POSCORR clamps, {} limited by the robot, monitor stop: {}",
-        r.poscorr_clamped, r.robot_limited, r.stopped_by_monitor
+        "robot: dead time {:.0} ms, lag {:.0} ms, compensation {}; axes peaked at {:.0} % of their speed, {:.0} % of \
+         their acceleration; {} POSCORR clamps; stopped: {}",
+        rb.dead_time_ms,
+        rb.lag_ms,
+        if rb.compensation { "on" } else { "off" },
+        rb.peak_speed_share * 100.0,
+        rb.peak_acceleration_share * 100.0,
+        r.poscorr_clamped,
+        rb.stop_reason.as_deref().unwrap_or("no"),
     );
+    if !rb.skipped.is_empty() {
+        let list: Vec<String> = rb.skipped.iter().map(|(k, n)| format!("{k} {n}")).collect();
+        let _ = writeln!(out, "balls skipped by the planner: {}", list.join(", "));
+    }
     for w in &r.warnings {
         let _ = writeln!(out, "warning: {w}");
     }

@@ -23,6 +23,20 @@
 //! ahead, or a hit far outside the workspace are rejected; a hit slightly
 //! outside is pulled in (with room to brake from the bat velocity), the bat
 //! speed and orientation are clamped to the cell's limits.
+//!
+//! Every stroke is then checked in joint space before it is taken: the
+//! path is sampled ([`JOINT_SAMPLES`] points to the hit), each point solved
+//! by the arm's inverse kinematics nearest the previous one (the
+//! configuration stays continuous), and the joints checked against the
+//! software limit switches, the singular wrist and [`JOINT_LIMIT_FRACTION`]
+//! of the axis speeds and accelerations. A stroke too fast for the axes is
+//! planned again with the Cartesian limits (and the bat speed) scaled down
+//! by what it lacked, up to [`JOINT_RETRIES`] times; one that still breaks
+//! a limit, cannot be solved, or would arrive more than [`MAX_LATE_S`] late
+//! is refused with the reason ([`PlanRejected::key`]) and the current
+//! motion goes on (home, or the stroke already under way). Follow-through
+//! and return run at [`CALM_LIMIT_FRACTION`] of the Cartesian limits, where
+//! no axis reaches its limit anywhere in the workspace.
 
 #![allow(clippy::needless_range_loop)] // parallel per-axis arrays
 
@@ -30,6 +44,7 @@ use rsruckig::prelude::*;
 
 use super::limits::GENERATOR_LIMIT_FRACTION;
 use super::{MotionLimits, Pose6};
+use crate::kinematics::{AXES, Joints, LimitKind, LimitViolation, Pose, Unreachable};
 use crate::plan::StrikePlan;
 use crate::time::Instant;
 
@@ -54,6 +69,29 @@ pub(crate) const KEEP_MAX_DT_S: f64 = 0.010;
 pub(crate) const KEEP_MAX_DP_M: f64 = 0.15;
 /// Typical ball speed at the hitting plane (after the bounce), m/s.
 pub(crate) const BALL_SPEED_AT_HIT: f64 = 4.0;
+/// Points of the path to the hit solved in joint space.
+pub const JOINT_SAMPLES: usize = 32;
+/// Share of the axis speed limits a stroke may use (the rest absorbs the
+/// sampling and the refinements to come).
+pub const JOINT_SPEED_FRACTION: f64 = 0.85;
+/// Share of the axis acceleration limits, lower: differences over the
+/// samples flatten the jerk-limited peaks.
+pub const JOINT_ACCELERATION_FRACTION: f64 = 0.7;
+/// A refinement within this of the checked stroke (m at the hit, and s)
+/// whose check left this much room (share of the allowed) is not checked
+/// again: the check costs tens of µs in the RSI thread.
+pub const RECHECK_DP_M: f64 = 0.02;
+/// See [`RECHECK_DP_M`].
+pub const RECHECK_DT_S: f64 = 0.005;
+/// See [`RECHECK_DP_M`].
+pub const RECHECK_ROOM: f64 = 0.85;
+/// Re-plans with lower Cartesian limits for a stroke too fast for the axes.
+pub const JOINT_RETRIES: usize = 2;
+/// A new ball's stroke arriving later than this is refused, s (the bat
+/// would be ~4 cm behind a ball crossing at 4 m/s).
+pub const MAX_LATE_S: f64 = 0.010;
+/// Share of the Cartesian limits for follow-through and return.
+pub const CALM_LIMIT_FRACTION: f64 = 0.5;
 /// Duration nudges tried when Ruckig misses the hitting time, s.
 const RETRY_NUDGES_S: [f64; 4] = [-0.0003, 0.0003, -0.0007, 0.0007];
 
@@ -71,7 +109,7 @@ pub enum Phase {
 }
 
 /// Why a plan was not taken.
-#[derive(Copy, Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[derive(Copy, Clone, Debug, PartialEq, thiserror::Error)]
 pub enum PlanRejected {
     /// A value is NaN or infinite.
     #[error("plan has non-finite values")]
@@ -88,6 +126,36 @@ pub enum PlanRejected {
     /// Ruckig found no trajectory (should not happen after sanitising).
     #[error("no trajectory to the hitting pose")]
     NoTrajectory,
+    /// A point of the stroke has no joint solution.
+    #[error("stroke out of the arm's reach")]
+    OutOfReach,
+    /// The stroke breaks an axis limit (even slowed down).
+    #[error("stroke breaks {0}")]
+    Joint(LimitViolation),
+    /// The stroke (slowed down to the axes' limits) arrives too late.
+    #[error("stroke would arrive too late")]
+    TooLate,
+}
+
+impl PlanRejected {
+    /// A short key for counting refusals by reason.
+    pub fn key(&self) -> &'static str {
+        match self {
+            PlanRejected::NonFinite => "non_finite",
+            PlanRejected::HitInPast => "hit_in_past",
+            PlanRejected::TooFarAhead => "too_far_ahead",
+            PlanRejected::OutsideWorkspace => "outside_workspace",
+            PlanRejected::NoTrajectory => "no_trajectory",
+            PlanRejected::OutOfReach => "out_of_reach",
+            PlanRejected::Joint(v) => match v.kind {
+                LimitKind::Position => "joint_position_limit",
+                LimitKind::SingularWrist => "singular_wrist",
+                LimitKind::Speed => "joint_speed",
+                LimitKind::Acceleration => "joint_acceleration",
+            },
+            PlanRejected::TooLate => "too_late",
+        }
+    }
 }
 
 /// The accepted target of a plan, in B.
@@ -108,6 +176,15 @@ pub struct StrokeTarget {
 
 type Otg = Ruckig<6, IgnoreErrorHandler>;
 
+/// What [`StrokeGenerator::joint_check`] found.
+enum JointTrouble {
+    /// Refuse the plan.
+    Rejected(PlanRejected),
+    /// Too fast for the axes: the largest speed and acceleration shares
+    /// of the allowed (> 1 where too fast), and the worst violation.
+    TooFast { speed: f64, acceleration: f64, violation: LimitViolation },
+}
+
 /// The online stroke generator (see the module doc).
 #[derive(Debug)]
 pub struct StrokeGenerator {
@@ -126,6 +203,10 @@ pub struct StrokeGenerator {
     a: Pose6,
     t_last: f64,
     late_by: f64,
+    /// The joints at `p` (kept continuous from home).
+    q: Joints,
+    /// The last full joint check's largest share of the allowed.
+    checked_room: f64,
     /// Ruckig calculations done.
     pub calculations: u64,
     /// Ruckig calculations that failed.
@@ -141,6 +222,7 @@ fn secs(t: Instant) -> f64 {
 impl StrokeGenerator {
     /// A generator at rest at `start`, at time `now`.
     pub fn new(lim: MotionLimits, now: Instant, start: Pose6) -> Self {
+        let home_joints = lim.home_joints;
         let mut input = InputParameter::new(None);
         for i in 0..6 {
             input.max_velocity[i] = lim.vmax[i] * GENERATOR_LIMIT_FRACTION;
@@ -161,6 +243,8 @@ impl StrokeGenerator {
             a: [0.0; 6],
             t_last: 0.0,
             late_by: 0.0,
+            q: home_joints,
+            checked_room: f64::INFINITY,
             calculations: 0,
             failures: 0,
             kept: 0,
@@ -271,17 +355,100 @@ impl StrokeGenerator {
         {
             return Ok(self.target.as_ref().expect("checked"));
         }
-        let target = self.target_of(plan)?;
+        let mut target = self.target_of(plan)?;
         let duration = target.hit_time - self.t_last;
         // Keep the current stroke aside: a refinement that can no longer be
         // met on time (the axes are already in their final, limit-bound
         // acceleration) but differs only a little is not worth arriving late.
         std::mem::swap(&mut self.traj, &mut self.spare);
         let (old_t0, old_target, old_phase) = (self.t0, self.target, self.phase);
+        let restore = |g: &mut Self| {
+            std::mem::swap(&mut g.traj, &mut g.spare);
+            g.t0 = old_t0;
+            g.set_limit_scale(1.0, 1.0);
+        };
+        // Solve the stroke, then check it in joint space; too fast for the
+        // axes: again with the Cartesian limits scaled down.
+        let q0 = match self.lim.arm.inverse_near(&Pose::from_pose6(&self.p), &self.q) {
+            Ok(q) => q,
+            Err(_) => self.q,
+        };
+        self.q = q0;
+        let (mut v_scale, mut a_scale) = (1.0, 1.0);
+        let mut attempt = 0;
+        loop {
+            self.set_limit_scale(v_scale, a_scale);
+            if !self.calculate_on_time(&target, duration) {
+                restore(self);
+                return Err(PlanRejected::NoTrajectory);
+            }
+            let small_refinement = attempt == 0
+                && old_phase == Phase::Approach
+                && self.checked_room < RECHECK_ROOM
+                && old_target.is_some_and(|old| {
+                    (old.hit_time - target.hit_time).abs() <= RECHECK_DT_S
+                        && (0..3).map(|i| (old.pose[i] - target.pose[i]).powi(2)).sum::<f64>().sqrt() <= RECHECK_DP_M
+                });
+            if small_refinement {
+                break;
+            }
+            match self.joint_check(q0) {
+                Ok(room) => {
+                    self.checked_room = room;
+                    break;
+                }
+                Err(JointTrouble::TooFast { .. }) if !self.lim.check_joint_rates => break,
+                Err(JointTrouble::Rejected(r)) => {
+                    restore(self);
+                    return Err(r);
+                }
+                Err(JointTrouble::TooFast { speed, acceleration, violation }) => {
+                    if attempt == JOINT_RETRIES {
+                        restore(self);
+                        return Err(PlanRejected::Joint(violation));
+                    }
+                    attempt += 1;
+                    v_scale /= speed.max(1.0);
+                    a_scale /= acceleration.max(1.0);
+                    for x in &mut target.velocity[..3] {
+                        *x /= speed.max(1.0);
+                    }
+                    target.clamped = true;
+                }
+            }
+        }
+        self.set_limit_scale(1.0, 1.0);
+        let late_by = (self.traj.get_duration() - duration).max(0.0);
+        let refinement = old_phase == Phase::Approach
+            && old_target.is_some_and(|old| (old.hit_time - target.hit_time).abs() <= KEEP_MAX_DT_S);
+        if late_by > MAX_LATE_S && !refinement {
+            restore(self);
+            return Err(PlanRejected::TooLate);
+        }
+        if late_by > LATE_TOLERANCE_S
+            && old_phase == Phase::Approach
+            && let Some(old) = old_target
+            && old.hit_time > self.t_last
+            && (old.hit_time - target.hit_time).abs() <= KEEP_MAX_DT_S
+            && (0..3).all(|i| (old.pose[i] - target.pose[i]).abs() <= KEEP_MAX_DP_M)
+            && (0..3).map(|i| (old.pose[i] - target.pose[i]).powi(2)).sum::<f64>().sqrt() <= late_by * BALL_SPEED_AT_HIT
+        {
+            restore(self);
+            self.kept += 1;
+            self.late_by = 0.0;
+            return Ok(self.target.as_ref().expect("old target"));
+        }
+        self.late_by = late_by;
+        self.phase = Phase::Approach;
+        self.target = Some(target);
+        Ok(self.target.as_ref().expect("just set"))
+    }
+
+    /// A trajectory to `target` ending `duration` from now, nudged where
+    /// Ruckig's synchronisation misses it; false if Ruckig fails.
+    fn calculate_on_time(&mut self, target: &StrokeTarget, duration: f64) -> bool {
         if !self.calculate(&target.pose, &target.velocity, Some(duration)) {
-            std::mem::swap(&mut self.traj, &mut self.spare);
-            self.t0 = old_t0;
-            return Err(PlanRejected::NoTrajectory);
+            return false;
         }
         // Ruckig's time-synchronisation step sometimes finds no profile for
         // exactly this duration (numerically, not physically) and returns
@@ -293,25 +460,98 @@ impl StrokeGenerator {
             }
             self.calculate(&target.pose, &target.velocity, Some(duration + nudge));
         }
-        let late_by = (self.traj.get_duration() - duration).max(0.0);
-        if late_by > LATE_TOLERANCE_S
-            && old_phase == Phase::Approach
-            && let Some(old) = old_target
-            && old.hit_time > self.t_last
-            && (old.hit_time - target.hit_time).abs() <= KEEP_MAX_DT_S
-            && (0..3).all(|i| (old.pose[i] - target.pose[i]).abs() <= KEEP_MAX_DP_M)
-            && (0..3).map(|i| (old.pose[i] - target.pose[i]).powi(2)).sum::<f64>().sqrt() <= late_by * BALL_SPEED_AT_HIT
-        {
-            std::mem::swap(&mut self.traj, &mut self.spare);
-            self.t0 = old_t0;
-            self.kept += 1;
-            self.late_by = 0.0;
-            return Ok(self.target.as_ref().expect("old target"));
+        true
+    }
+
+    /// Ruckig's limits: the cell's (times the generator's fraction) scaled
+    /// by `v` (velocity) and `a` (acceleration and jerk).
+    fn set_limit_scale(&mut self, v: f64, a: f64) {
+        for i in 0..6 {
+            self.input.max_velocity[i] = self.lim.vmax[i] * GENERATOR_LIMIT_FRACTION * v;
+            self.input.max_acceleration[i] = self.lim.amax[i] * GENERATOR_LIMIT_FRACTION * a;
+            self.input.max_jerk[i] = self.lim.jmax[i] * GENERATOR_LIMIT_FRACTION * a;
         }
-        self.late_by = late_by;
-        self.phase = Phase::Approach;
-        self.target = Some(target);
-        Ok(self.target.as_ref().expect("just set"))
+    }
+
+    /// The new trajectory in joint space from `q0` (the joints now): each of
+    /// [`JOINT_SAMPLES`] points solved nearest the previous, checked against
+    /// the software limits and the singular wrist, and the speeds and
+    /// accelerations between them against [`JOINT_LIMIT_FRACTION`] of the
+    /// axis limits. Bounded work, no allocation. `Ok` carries the largest
+    /// share of the allowed speed or acceleration.
+    fn joint_check(&self, q0: Joints) -> Result<f64, JointTrouble> {
+        let arm = &self.lim.arm;
+        let lim = &arm.limits;
+        let h = self.traj.get_duration() / JOINT_SAMPLES as f64;
+        if h <= 0.0 {
+            return Ok(0.0);
+        }
+        // The joint speed now: from where the bat was one step ago.
+        let before: Pose6 = core::array::from_fn(|i| self.p[i] - self.v[i] * h);
+        let mut qd_prev = match arm.inverse_near(&Pose::from_pose6(&before), &q0) {
+            Ok(q) => Some(core::array::from_fn(|i| (q0.0[i] - q.0[i]) / h)),
+            Err(_) => None,
+        };
+        let mut q_prev = q0;
+        let (mut speed, mut acceleration) = (0.0f64, 0.0f64);
+        let mut worst: Option<LimitViolation> = None;
+        let mut worst_share = 0.0;
+        for k in 1..=JOINT_SAMPLES {
+            let p = self.pose_at(self.t0 + k as f64 * h);
+            let q = match arm.inverse_near(&Pose::from_pose6(&p), &q_prev) {
+                Ok(q) => q,
+                Err(Unreachable::OutOfReach) => return Err(JointTrouble::Rejected(PlanRejected::OutOfReach)),
+                Err(Unreachable::Limit(v)) => return Err(JointTrouble::Rejected(PlanRejected::Joint(v))),
+            };
+            if let Err(v) = lim.check_position(&q) {
+                return Err(JointTrouble::Rejected(PlanRejected::Joint(v)));
+            }
+            let qd: [f64; AXES] = core::array::from_fn(|i| (q.0[i] - q_prev.0[i]) / h);
+            for i in 0..AXES {
+                let share = qd[i].abs() / (lim.speed[i] * JOINT_SPEED_FRACTION);
+                speed = speed.max(share);
+                if share > 1.0 && share > worst_share {
+                    worst_share = share;
+                    worst = Some(LimitViolation {
+                        axis: crate::kinematics::Axis::ALL[i],
+                        kind: LimitKind::Speed,
+                        value: qd[i],
+                        limit: lim.speed[i],
+                    });
+                }
+                if let Some(prev) = qd_prev {
+                    let qdd = (qd[i] - prev[i]) / h;
+                    let share = qdd.abs() / (lim.acceleration[i] * JOINT_ACCELERATION_FRACTION);
+                    acceleration = acceleration.max(share);
+                    if share > 1.0 && share > worst_share {
+                        worst_share = share;
+                        worst = Some(LimitViolation {
+                            axis: crate::kinematics::Axis::ALL[i],
+                            kind: LimitKind::Acceleration,
+                            value: qdd,
+                            limit: lim.acceleration[i],
+                        });
+                    }
+                }
+            }
+            q_prev = q;
+            qd_prev = Some(qd);
+        }
+        match worst {
+            None => Ok(speed.max(acceleration)),
+            Some(violation) => Err(JointTrouble::TooFast { speed, acceleration, violation }),
+        }
+    }
+
+    /// The new trajectory's pose at absolute time `t`.
+    fn pose_at(&self, t: f64) -> Pose6 {
+        if self.traj.get_duration() <= 0.0 {
+            return self.p;
+        }
+        let mut p = DataArrayOrVec::Stack([0.0; 6]);
+        let mut section = None;
+        self.traj.at_time((t - self.t0).max(0.0), &mut Some(&mut p), &mut None, &mut None, &mut None, &mut section);
+        core::array::from_fn(|i| p[i])
     }
 
     /// Replaces the state the next plan starts from (after the safety
@@ -328,7 +568,7 @@ impl StrokeGenerator {
             }
             (Phase::FollowThrough, Some(_)) => {
                 let rest = self.p;
-                if !self.calculate(&rest, &[0.0; 6], None) {
+                if !self.calculate_calm(&rest) {
                     self.go_home();
                 }
             }
@@ -355,7 +595,7 @@ impl StrokeGenerator {
                         let m = if i < 3 { WALL_MARGIN_M } else { 0.0 };
                         rest[i] = (self.p[i] + v[i] * lim.follow_through).clamp(lim.lo[i] + m, lim.hi[i] - m);
                     }
-                    if self.calculate(&rest, &[0.0; 6], None) {
+                    if self.calculate_calm(&rest) {
                         self.phase = Phase::FollowThrough;
                     } else {
                         self.go_home();
@@ -373,9 +613,32 @@ impl StrokeGenerator {
         self.p
     }
 
+    /// To rest at `pos` at [`CALM_LIMIT_FRACTION`] of the limits, slower
+    /// still where the joint check finds the axes too fast (near a
+    /// stretched elbow a small Cartesian motion is a fast joint motion).
+    fn calculate_calm(&mut self, pos: &Pose6) -> bool {
+        let q0 = self.lim.arm.inverse_near(&Pose::from_pose6(&self.p), &self.q).unwrap_or(self.q);
+        self.q = q0;
+        let (mut v, mut a) = (CALM_LIMIT_FRACTION, CALM_LIMIT_FRACTION);
+        let mut ok = false;
+        for _ in 0..=JOINT_RETRIES + 1 {
+            self.set_limit_scale(v, a);
+            ok = self.calculate(pos, &[0.0; 6], None);
+            match self.joint_check(q0) {
+                Err(JointTrouble::TooFast { speed, acceleration, .. }) if ok && self.lim.check_joint_rates => {
+                    v /= speed.max(1.0);
+                    a /= acceleration.max(1.0);
+                }
+                _ => break,
+            }
+        }
+        self.set_limit_scale(1.0, 1.0);
+        ok
+    }
+
     fn go_home(&mut self) {
         let home = self.lim.home;
-        if self.calculate(&home, &[0.0; 6], None) {
+        if self.calculate_calm(&home) {
             self.phase = Phase::Return;
         } else {
             self.phase = Phase::Hold;
@@ -383,8 +646,16 @@ impl StrokeGenerator {
         self.target = None;
     }
 
-    /// Samples the trajectory at absolute time `t` into the state.
+    /// Samples the trajectory at absolute time `t` into the state. An empty
+    /// trajectory (every axis at rest at its target) leaves the position
+    /// as it is: Ruckig samples its disabled axes as zeros.
     fn sample_into_state(&mut self, t: f64) {
+        if self.traj.get_duration() <= 0.0 {
+            self.v = [0.0; 6];
+            self.a = [0.0; 6];
+            self.t_last = t;
+            return;
+        }
         let mut p = DataArrayOrVec::Stack([0.0; 6]);
         let mut v = DataArrayOrVec::Stack([0.0; 6]);
         let mut a = DataArrayOrVec::Stack([0.0; 6]);

@@ -4,6 +4,7 @@
 #![allow(clippy::needless_range_loop)] // parallel per-axis arrays
 
 use crate::calib::RobotFile;
+use crate::kinematics::{Arm, Joints};
 use crate::physics::Vec3;
 use crate::plan::EulerZyx;
 
@@ -39,6 +40,15 @@ pub struct MotionLimits {
     pub base_yaw: f64,
     /// Base origin in T, m.
     pub base_xyz: [f64; 3],
+    /// The arm (kinematics, axis limits) every stroke is checked against.
+    pub arm: Arm,
+    /// The joints at home.
+    pub home_joints: Joints,
+    /// Keep strokes within the axes' speeds and accelerations (slow them
+    /// down, or refuse them). Off by default for now: the Cartesian
+    /// strokes the hitting window asks for exceed the KR 6 R900's axis
+    /// rates, and the slowed strokes miss (ARCHITECTURE.md, issue 16).
+    pub check_joint_rates: bool,
 }
 
 impl MotionLimits {
@@ -61,6 +71,9 @@ impl MotionLimits {
             follow_through: r.rsi.follow_through_s,
             base_yaw: r.base_yaw(),
             base_xyz: r.cell.base_in_table_xyz_m,
+            arm: r.arm(),
+            home_joints: r.home_joints(&r.arm()).expect("a validated robot.toml has home joints"),
+            check_joint_rates: false,
         }
     }
 
@@ -119,7 +132,7 @@ pub(crate) fn zyx_of(r: &Mat3) -> (f64, f64, f64) {
 }
 
 /// `x` plus a multiple of 2π, within π of `reference`.
-pub(crate) fn unwrap_near(x: f64, reference: f64) -> f64 {
+pub fn unwrap_near(x: f64, reference: f64) -> f64 {
     let tau = std::f64::consts::TAU;
     x - ((x - reference) / tau).round() * tau
 }

@@ -92,6 +92,8 @@ pub struct RuntimeConfig {
     pub record_rsi: bool,
     /// The logo thread, if on.
     pub logo: Option<LogoRuntime>,
+    /// Compensate the robot's dead time and lag (`[servo]`).
+    pub servo_compensation: bool,
 }
 
 /// The logo thread's settings.
@@ -138,6 +140,7 @@ impl RuntimeConfig {
             log_interval_s: 10.0,
             record_rsi: false,
             logo: None,
+            servo_compensation: true,
         }
     }
 }
@@ -225,7 +228,9 @@ impl Daemon {
         let tracker_socket = UdpSocket::bind(cfg.tracker_bind)?;
         tracker_socket.set_read_timeout(Some(INGEST_POLL))?;
         let tracker_addr = tracker_socket.local_addr()?;
-        let session = RsiSession::new(SessionConfig::from_calibration(cal, &cfg.sentype))
+        let mut session_cfg = SessionConfig::from_calibration(cal, &cfg.sentype);
+        session_cfg.servo.enabled = cfg.servo_compensation;
+        let session = RsiSession::new(session_cfg)
             .map_err(|e| io::Error::new(io::ErrorKind::InvalidInput, e.to_string()))?;
         let server = RsiServer::bind(cfg.rsi_bind, session, cfg.rsi_wait)?;
         let rsi_addr = server.local_addr()?;

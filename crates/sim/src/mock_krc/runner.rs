@@ -11,7 +11,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::thread::JoinHandle;
 
 use super::config::{ContextConfig, EthernetConfig, RsiFileError};
-use super::controller::{ControllerConfig, CorrMode, MockController, PathSample, StopReason, Verdict};
+use super::controller::{ControllerConfig, CorrMode, MockController, PathSample, Servo, StopReason, Verdict};
 use super::faults::{FaultInjector, Faults, Link, MAX_DATAGRAM, UdpLink};
 use topspin_core::calib::RobotFile;
 use topspin_core::time::{Duration, Instant};
@@ -39,8 +39,10 @@ pub struct MockKrcConfig {
 }
 
 impl MockKrcConfig {
-    /// From the controller-side files and the robot cell: start at home,
-    /// the robot's limits a little above the PC's (`robot_margin`, e.g. 1.02).
+    /// From the controller-side files and the robot cell: start at home
+    /// (in the home joints), the arm's axis limits scaled by
+    /// `robot_margin` (1.0: the robot is what the calibration says), the
+    /// calibration's dead time and lag.
     pub fn from_files(
         ethernet: &EthernetConfig,
         context: &ContextConfig,
@@ -48,10 +50,9 @@ impl MockKrcConfig {
         mode: CorrMode,
         robot_margin: f64,
     ) -> Self {
-        let l = &robot.limits;
-        let cat = |a: [f64; 3], b: [f64; 3], s: f64| {
-            [a[0] * s, a[1] * s, a[2] * s, b[0], b[1], b[2]].map(|x| x * robot_margin)
-        };
+        let mut arm = robot.arm();
+        arm.limits.speed = arm.limits.speed.map(|x| x * robot_margin);
+        arm.limits.acceleration = arm.limits.acceleration.map(|x| x * robot_margin);
         let h = &robot.home;
         let controller = ControllerConfig {
             cycle_ms: robot.rsi.cycle_ms,
@@ -61,8 +62,13 @@ impl MockKrcConfig {
             send: ethernet.send.clone(),
             late_limit: context.timeout as u64,
             start: [h.xyz_m[0] * 1e3, h.xyz_m[1] * 1e3, h.xyz_m[2] * 1e3, h.abc_deg[0], h.abc_deg[1], h.abc_deg[2]],
-            vmax: cat(l.velocity_m_s, l.rot_velocity_deg_s, 1e3),
-            amax: cat(l.acceleration_m_s2, l.rot_acceleration_deg_s2, 1e3),
+            start_joints: robot.home_joints(&arm).expect("a validated robot.toml has home joints"),
+            arm,
+            servo: Servo {
+                dead_time_cycles: robot.servo.dead_time_cycles(robot.rsi.cycle_ms),
+                lag_s: robot.servo.lag_s(),
+            },
+            stop_on_axis_rates: false,
             lower_mm: context.lower_mm,
             upper_mm: context.upper_mm,
             max_rot_deg: context.max_rot_deg,
@@ -86,7 +92,7 @@ impl MockKrcConfig {
         let e = EthernetConfig::parse(super::config::DEFAULT_ETHERNET_XML)?;
         let c = ContextConfig::parse(super::config::DEFAULT_CONTEXT_XML)?;
         let r = topspin_core::calib::Calibration::default_cell().robot;
-        Ok(Self::from_files(&e, &c, &r, CorrMode::Absolute, 1.02))
+        Ok(Self::from_files(&e, &c, &r, CorrMode::Absolute, 1.0))
     }
 }
 
@@ -102,7 +108,13 @@ pub struct MockResult {
     pub wrong_type: u64,
     pub malformed: u64,
     pub poscorr_clamped: u64,
-    pub robot_limited: u64,
+    /// Why the controller stopped RSI, if it did.
+    pub stopped: Option<StopReason>,
+    /// The fastest and hardest any axis moved, as shares of its limits.
+    pub peak_speed_share: f64,
+    pub peak_acceleration_share: f64,
+    /// Cycles with an axis over its speed or acceleration limit.
+    pub rates_over: u64,
     pub dropped: u64,
     pub delayed: u64,
     pub duplicated: u64,
@@ -117,15 +129,14 @@ pub struct MockResult {
 }
 
 impl MockResult {
-    /// Writes the path as CSV: time, IPOC, on time, robot limited, commanded
-    /// and actual pose.
+    /// Writes the path as CSV: time, IPOC, on time, commanded and actual
+    /// pose, actual joints.
     pub fn write_csv(&self, path: &Path) -> io::Result<()> {
         let mut w = csv::Writer::from_path(path)?;
         w.write_record([
             "t_s",
             "ipoc",
             "on_time",
-            "robot_limited",
             "cmd_x_mm",
             "cmd_y_mm",
             "cmd_z_mm",
@@ -138,16 +149,22 @@ impl MockResult {
             "act_a_deg",
             "act_b_deg",
             "act_c_deg",
+            "a1_deg",
+            "a2_deg",
+            "a3_deg",
+            "a4_deg",
+            "a5_deg",
+            "a6_deg",
         ])?;
         for s in &self.path {
             let mut rec = vec![
                 format!("{:.6}", s.t.as_secs_f64()),
                 s.ipoc.to_string(),
                 (s.on_time as u8).to_string(),
-                (s.robot_limited as u8).to_string(),
             ];
             rec.extend(s.commanded.iter().map(|x| format!("{x:.4}")));
             rec.extend(s.actual.iter().map(|x| format!("{x:.4}")));
+            rec.extend(s.joints.iter().map(|x| format!("{x:.4}")));
             w.write_record(&rec)?;
         }
         w.flush()
@@ -249,6 +266,9 @@ fn cycle_loop<L: Link>(link: &mut L, cfg: &MockKrcConfig, stop: &AtomicBool) -> 
     out.wrong_type = ctrl.wrong_type;
     out.malformed = ctrl.malformed;
     out.poscorr_clamped = ctrl.poscorr_clamped;
-    out.robot_limited = ctrl.robot_limited;
+    out.stopped = ctrl.stopped;
+    out.peak_speed_share = ctrl.peak_speed_share;
+    out.peak_acceleration_share = ctrl.peak_acceleration_share;
+    out.rates_over = ctrl.rates_over;
     Ok(out)
 }
