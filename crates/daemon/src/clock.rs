@@ -64,7 +64,15 @@ fn monotonic_ns() -> u64 {
 /// reads (each pair overestimates it by the time between its two reads).
 fn monotonic_at_epoch() -> u64 {
     static AT: OnceLock<u64> = OnceLock::new();
-    *AT.get_or_init(|| (0..8).map(|_| { let n = now().0; monotonic_ns().saturating_sub(n) }).min().unwrap_or(0))
+    *AT.get_or_init(|| {
+        (0..8)
+            .map(|_| {
+                let n = now().0;
+                monotonic_ns().saturating_sub(n)
+            })
+            .min()
+            .unwrap_or(0)
+    })
 }
 
 /// Sleeps in the kernel until `deadline`, without spinning
@@ -80,7 +88,8 @@ pub fn sleep_until_in_kernel(deadline: Instant) -> Duration {
     loop {
         // SAFETY: `ts` is a valid timespec; with TIMER_ABSTIME the
         // remaining-time pointer may be null. Returns an error number.
-        let rc = unsafe { libc::clock_nanosleep(libc::CLOCK_MONOTONIC, libc::TIMER_ABSTIME, &ts, std::ptr::null_mut()) };
+        let rc =
+            unsafe { libc::clock_nanosleep(libc::CLOCK_MONOTONIC, libc::TIMER_ABSTIME, &ts, std::ptr::null_mut()) };
         if rc != libc::EINTR {
             break;
         }

@@ -81,7 +81,11 @@ pub(crate) fn isolated(host: &Host) -> Result<(CpuSet, Vec<&'static str>), Strin
             sources.push("cpuset partition");
         }
     }
-    if readable { Ok((set, sources)) } else { Err("cannot read /sys/devices/system/cpu/isolated or /proc/cmdline".to_owned()) }
+    if readable {
+        Ok((set, sources))
+    } else {
+        Err("cannot read /sys/devices/system/cpu/isolated or /proc/cmdline".to_owned())
+    }
 }
 
 /// The CPUs without the periodic scheduler tick (`nohz_full=`).
@@ -90,7 +94,9 @@ fn nohz_full(host: &Host) -> CpuSet {
         .read("/sys/devices/system/cpu/nohz_full")
         .ok()
         .and_then(|t| parse_cpu_list(&t))
-        .or_else(|| host.root.read("/proc/cmdline").ok().and_then(|c| cmdline_param(&c, "nohz_full").and_then(parse_cpu_list)))
+        .or_else(|| {
+            host.root.read("/proc/cmdline").ok().and_then(|c| cmdline_param(&c, "nohz_full").and_then(parse_cpu_list))
+        })
         .unwrap_or_default()
 }
 
@@ -101,6 +107,15 @@ fn cores_label(set: &CpuSet) -> String {
 
 fn on_core(pins: &[Pinned], core: usize, except: &str) -> Vec<&'static str> {
     pins.iter().filter(|p| p.core == Some(core) && p.thread != except).map(|p| p.thread).collect()
+}
+
+/// A warning when the RSI core is known not to be online (the `cores`
+/// check fails on it; nothing more to say about it here).
+fn offline(host: &Host, name: &'static str, rsi: usize) -> Option<Check> {
+    let online = online(host).ok()?;
+    (!online.contains(&rsi)).then(|| {
+        Check::warn(name, format!("RSI core {rsi} is not online (see cores)"), "set threads.rsi_core to an online core")
+    })
 }
 
 /// `cores`: every configured core is online (fail if not), this process may
@@ -143,7 +158,10 @@ pub fn cores(host: &Host, cfg: &DaemonConfig) -> Check {
                         format!("move the {who} thread off core {c}, or set threads.rsi_wait = \"blocking\""),
                     );
                 } else if t.realtime {
-                    f.note(format!("the RSI thread shares core {c} with {who} (SCHED_FIFO {} preempts them)", t.rsi_priority));
+                    f.note(format!(
+                        "the RSI thread shares core {c} with {who} (SCHED_FIFO {} preempts them)",
+                        t.rsi_priority
+                    ));
                 } else {
                     f.warn(
                         format!("the RSI thread shares core {c} with {who} without SCHED_FIFO (threads.realtime = false): it waits its turn"),
@@ -163,7 +181,8 @@ pub fn cores(host: &Host, cfg: &DaemonConfig) -> Check {
         .ok()
         .and_then(|s| status_field(&s, "Cpus_allowed_list").and_then(parse_cpu_list))
     {
-        let outside: CpuSet = pins.iter().filter_map(|p| p.core).filter(|c| online.contains(c) && !allowed.contains(c)).collect();
+        let outside: CpuSet =
+            pins.iter().filter_map(|p| p.core).filter(|c| online.contains(c) && !allowed.contains(c)).collect();
         if !outside.is_empty() {
             f.warn(
                 format!(
@@ -186,8 +205,15 @@ pub fn cores(host: &Host, cfg: &DaemonConfig) -> Check {
 pub fn isolation(host: &Host, cfg: &DaemonConfig) -> Check {
     const NAME: &str = "isolation";
     let Some(rsi) = cfg.threads.rsi_core.0 else {
-        return Check::warn(NAME, "the RSI thread is not pinned (threads.rsi_core = \"none\"): no core to isolate", "pin it: threads.rsi_core = N");
+        return Check::warn(
+            NAME,
+            "the RSI thread is not pinned (threads.rsi_core = \"none\"): no core to isolate",
+            "pin it: threads.rsi_core = N",
+        );
     };
+    if let Some(c) = offline(host, NAME, rsi) {
+        return c;
+    }
     let (isolated, sources) = match isolated(host) {
         Ok(x) => x,
         Err(e) => return Check::unknown(NAME, e),
@@ -230,8 +256,15 @@ pub fn isolation(host: &Host, cfg: &DaemonConfig) -> Check {
 pub fn smt(host: &Host, cfg: &DaemonConfig) -> Check {
     const NAME: &str = "smt";
     let Some(rsi) = cfg.threads.rsi_core.0 else {
-        return Check::warn(NAME, "the RSI thread is not pinned (threads.rsi_core = \"none\")", "pin it: threads.rsi_core = N");
+        return Check::warn(
+            NAME,
+            "the RSI thread is not pinned (threads.rsi_core = \"none\")",
+            "pin it: threads.rsi_core = N",
+        );
     };
+    if let Some(c) = offline(host, NAME, rsi) {
+        return c;
+    }
     let path = format!("/sys/devices/system/cpu/cpu{rsi}/topology/thread_siblings_list");
     let siblings = match host.root.read(&path) {
         Ok(t) => match parse_cpu_list(&t) {
@@ -262,7 +295,10 @@ pub fn smt(host: &Host, cfg: &DaemonConfig) -> Check {
         let threads = on_core(&pins, *s, "rsi");
         if !threads.is_empty() {
             f.warn(
-                format!("RSI core {rsi}'s SMT sibling {s} runs the {} thread: they share one physical core", threads.join(" and ")),
+                format!(
+                    "RSI core {rsi}'s SMT sibling {s} runs the {} thread: they share one physical core",
+                    threads.join(" and ")
+                ),
                 fix.clone(),
             );
         } else if !isolated.contains(s) {
@@ -425,7 +461,10 @@ mod tests {
         f.cpus(4).file("/sys/devices/system/cpu/isolated", "\n");
         let c = isolation(&f.host, &four_cores());
         assert_eq!(c.status, Status::Warn);
-        assert_eq!(c.detail, "RSI core 2 is not isolated (isolated: none): any task may run there and delay the RSI thread");
+        assert_eq!(
+            c.detail,
+            "RSI core 2 is not isolated (isolated: none): any task may run there and delay the RSI thread"
+        );
         assert!(c.fix.unwrap().starts_with("boot with isolcpus=2 nohz_full=2 rcu_nocbs=2"));
 
         // An old kernel without the sysfs file: the command line counts.
@@ -443,6 +482,12 @@ mod tests {
         // Nothing readable.
         let f = Fake::new();
         assert!(isolation(&f.host, &four_cores()).detail.starts_with("could not check"));
+
+        // A core that is not there: the cores check fails it, this one says so.
+        f.cpus(2);
+        let c = isolation(&f.host, &four_cores());
+        assert_eq!((c.status, c.detail.as_str()), (Status::Warn, "RSI core 2 is not online (see cores)"));
+        assert_eq!(smt(&f.host, &four_cores()).detail, "RSI core 2 is not online (see cores)");
     }
 
     #[test]
@@ -479,7 +524,9 @@ mod tests {
         assert_eq!(c.detail, "RSI core 2's SMT sibling 0 is isolated and runs no topspin thread");
 
         let f = Fake::new();
-        assert!(smt(&f.host, &cfg).detail.starts_with("could not check: cannot read /sys/devices/system/cpu/cpu2/topology"));
+        assert!(
+            smt(&f.host, &cfg).detail.starts_with("could not check: cannot read /sys/devices/system/cpu/cpu2/topology")
+        );
     }
 
     #[test]
@@ -496,7 +543,9 @@ mod tests {
         f.file("/sys/devices/system/cpu/cpu2/cpufreq/scaling_governor", "powersave\n");
         let c = governor(&f.host, &four_cores());
         assert_eq!(c.status, Status::Warn);
-        assert!(c.detail.starts_with("cores 1,3: performance (intel_pstate); core 2: powersave (intel_pstate): the cores slow down"));
+        assert!(c.detail.starts_with(
+            "cores 1,3: performance (intel_pstate); core 2: powersave (intel_pstate): the cores slow down"
+        ));
         assert!(c.fix.unwrap().starts_with("`sudo cpupower frequency-set -g performance`"));
 
         // A virtual machine: no cpufreq at all.

@@ -173,10 +173,7 @@ fn clock_sync() -> Result<ClockSync, String> {
     if state < 0 {
         return Err(os_error());
     }
-    Ok(ClockSync {
-        synced: state != libc::TIME_ERROR && tx.status & libc::STA_UNSYNC == 0,
-        est_error_us: tx.esterror,
-    })
+    Ok(ClockSync { synced: state != libc::TIME_ERROR && tx.status & libc::STA_UNSYNC == 0, est_error_us: tx.esterror })
 }
 
 #[cfg(test)]

@@ -30,8 +30,8 @@ pub mod host;
 pub mod net;
 pub mod probe;
 pub mod rt;
-pub mod system;
 pub mod sysfs;
+pub mod system;
 
 use std::fmt::Write as _;
 
@@ -112,7 +112,11 @@ impl Check {
 
     /// A warning for a check that could not read what it needs.
     pub fn unknown(name: &'static str, why: impl std::fmt::Display) -> Check {
-        Check::warn(name, format!("could not check: {why}"), "run `topspin doctor` on the robot PC itself (not in a container)")
+        Check::warn(
+            name,
+            format!("could not check: {why}"),
+            "run `topspin doctor` on the robot PC itself (not in a container)",
+        )
     }
 }
 
@@ -317,7 +321,10 @@ mod tests {
              FAIL  cores   core 7 is not online  fix: set threads.rsi_core\n1 pass, 1 warn, 1 fail\n"
         );
         let json = serde_json::to_value(&r).unwrap();
-        assert_eq!(json["checks"][0], serde_json::json!({"name": "kernel", "status": "pass", "detail": "PREEMPT_RT", "fix": null}));
+        assert_eq!(
+            json["checks"][0],
+            serde_json::json!({"name": "kernel", "status": "pass", "detail": "PREEMPT_RT", "fix": null})
+        );
         assert_eq!(json["summary"], serde_json::json!({"pass": 1, "warn": 1, "fail": 1}));
         assert_eq!(Report::new(vec![Check::warn("swap", "on", "x")]).exit_code(), 0);
     }

@@ -32,7 +32,8 @@ pub fn addresses(host: &Host, cfg: &DaemonConfig) -> Check {
     };
     let n = &cfg.network;
     let mut binds = vec![("network.tracker_bind", n.tracker_bind.ip()), ("network.rsi_bind", n.rsi_bind.ip())];
-    let mut sources = vec![("network.tracker_source", n.tracker_source), ("network.controller_source", n.controller_source)];
+    let mut sources =
+        vec![("network.tracker_source", n.tracker_source), ("network.controller_source", n.controller_source)];
     if cfg.logo.enabled {
         binds.push(("logo.crops_bind", cfg.logo.crops_bind.ip()));
         sources.push(("logo.crops_source", cfg.logo.crops_source));
@@ -61,7 +62,9 @@ pub fn addresses(host: &Host, cfg: &DaemonConfig) -> Check {
         let via: Vec<&Interface> = ifs.iter().filter(|i| i.covers(ip)).collect();
         match via.first() {
             None => f.warn(
-                format!("{key} {ip} is on none of this PC's networks: its datagrams would have to come through a router"),
+                format!(
+                    "{key} {ip} is on none of this PC's networks: its datagrams would have to come through a router"
+                ),
                 format!("connect that sender to a NIC of this PC on its subnet, or correct {key}"),
             ),
             Some(first) => {
@@ -94,7 +97,9 @@ pub(crate) fn nic_irqs(host: &Host, name: &str) -> Vec<u32> {
             }
         }
     }
-    if let Some(irq) = host.root.read_trim(&format!("{dev}/irq")).ok().and_then(|t| t.parse::<u32>().ok()).filter(|i| *i > 0) {
+    if let Some(irq) =
+        host.root.read_trim(&format!("{dev}/irq")).ok().and_then(|t| t.parse::<u32>().ok()).filter(|i| *i > 0)
+    {
         return vec![irq];
     }
     // Last resort: /proc/interrupts lines whose action names the interface
@@ -103,7 +108,9 @@ pub(crate) fn nic_irqs(host: &Host, name: &str) -> Vec<u32> {
     table
         .lines()
         .filter(|l| {
-            l.split_whitespace().last().is_some_and(|a| a == name || a.strip_prefix(name).is_some_and(|r| r.starts_with('-')))
+            l.split_whitespace()
+                .last()
+                .is_some_and(|a| a == name || a.strip_prefix(name).is_some_and(|r| r.starts_with('-')))
         })
         .filter_map(|l| l.split(':').next()?.trim().parse().ok())
         .collect()
@@ -128,7 +135,11 @@ pub fn rsi_nic(host: &Host, cfg: &DaemonConfig) -> Check {
     let bind = cfg.network.rsi_bind;
     let ip: IpAddr = bind.ip();
     if ip.is_unspecified() {
-        return Check::warn(NAME, format!("network.rsi_bind {bind} is every interface: no one NIC to check"), RSI_BIND_FIX);
+        return Check::warn(
+            NAME,
+            format!("network.rsi_bind {bind} is every interface: no one NIC to check"),
+            RSI_BIND_FIX,
+        );
     }
     let ifs = match &host.interfaces {
         Ok(v) => v,
@@ -154,7 +165,8 @@ pub fn rsi_nic(host: &Host, cfg: &DaemonConfig) -> Check {
         Ok(s) => f.note(format!("{name} (holds {ip}) {s}")),
         Err(e) => f.note(format!("{name} (holds {ip}), link unknown ({e})")),
     }
-    if let Some(speed) = host.root.read_trim(&format!("/sys/class/net/{name}/speed")).ok().and_then(|s| s.parse::<i64>().ok())
+    if let Some(speed) =
+        host.root.read_trim(&format!("/sys/class/net/{name}/speed")).ok().and_then(|s| s.parse::<i64>().ok())
         && speed > 0
     {
         f.note(format!("{speed} Mb/s"));
@@ -168,7 +180,10 @@ pub fn rsi_nic(host: &Host, cfg: &DaemonConfig) -> Check {
         return f.finish();
     }
     let Some(rsi) = cfg.threads.rsi_core.0 else {
-        f.warn("the RSI thread is not pinned (threads.rsi_core = \"none\"): no core to steer the IRQs to", "pin it: threads.rsi_core = N");
+        f.warn(
+            "the RSI thread is not pinned (threads.rsi_core = \"none\"): no core to steer the IRQs to",
+            "pin it: threads.rsi_core = N",
+        );
         return f.finish();
     };
     let mut by_affinity: BTreeMap<String, Vec<u32>> = BTreeMap::new();
@@ -186,7 +201,8 @@ pub fn rsi_nic(host: &Host, cfg: &DaemonConfig) -> Check {
         }
     }
     let list = |v: &[u32]| v.iter().map(u32::to_string).collect::<Vec<_>>().join(",");
-    let mut placed: Vec<String> = by_affinity.iter().map(|(cores, irqs)| format!("IRQ {} → core {cores}", list(irqs))).collect();
+    let mut placed: Vec<String> =
+        by_affinity.iter().map(|(cores, irqs)| format!("IRQ {} → core {cores}", list(irqs))).collect();
     if !unknown.is_empty() {
         placed.push(format!("IRQ {} → unreadable", list(&unknown)));
     }
@@ -265,7 +281,11 @@ mod tests {
         cfg.network.controller_source = "10.0.0.9".parse().unwrap();
         let c = addresses(&f.host, &cfg);
         assert_eq!(c.status, Status::Warn);
-        assert!(c.detail.contains("network.controller_source 10.0.0.9 is reached through eth0, but network.rsi_bind is on eth1"));
+        assert!(
+            c.detail.contains(
+                "network.controller_source 10.0.0.9 is reached through eth0, but network.rsi_bind is on eth1"
+            )
+        );
         cfg.network.controller_source = "172.16.0.1".parse().unwrap();
         assert!(addresses(&f.host, &cfg).detail.contains("172.16.0.1 is on none of this PC's networks"));
         cfg.network.tracker_bind = "0.0.0.0:41000".parse().unwrap();
@@ -275,7 +295,11 @@ mod tests {
         cfg.network.rsi_bind = "192.168.7.2:49152".parse().unwrap();
         let c = addresses(&f.host, &cfg);
         assert_eq!(c.status, Status::Fail);
-        assert!(c.detail.contains("network.rsi_bind 192.168.7.2 is on no interface: the daemon cannot bind it"), "{}", c.detail);
+        assert!(
+            c.detail.contains("network.rsi_bind 192.168.7.2 is on no interface: the daemon cannot bind it"),
+            "{}",
+            c.detail
+        );
 
         let mut f = Fake::new();
         f.host.interfaces = Err("Operation not permitted".into());
@@ -297,7 +321,9 @@ mod tests {
         let c = rsi_nic(&f.host, &cell());
         assert_eq!(c.status, Status::Warn);
         assert!(c.detail.ends_with("IRQ 42 → core 0, IRQ 41 → core 2: a datagram may wake the blocked RSI thread (core 2) from another core (≈ 30 µs each way)"), "{}", c.detail);
-        assert!(c.fix.unwrap().starts_with("for each IRQ: `echo 2 | sudo tee /proc/irq/N/smp_affinity_list` (N in 41,42)"));
+        assert!(
+            c.fix.unwrap().starts_with("for each IRQ: `echo 2 | sudo tee /proc/irq/N/smp_affinity_list` (N in 41,42)")
+        );
 
         // Busy polling wants them elsewhere: IRQ 41 on the RSI core is wrong now.
         let mut busy = cell();

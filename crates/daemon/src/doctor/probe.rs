@@ -64,7 +64,9 @@ pub struct ProbeResult {
 
 fn refused(w: &rt::RtWarning) -> String {
     match w.what {
-        RtRefused::Pin { core } => format!("could not pin to core {core} (no such core, or a cpuset forbids it): not pinned"),
+        RtRefused::Pin { core } => {
+            format!("could not pin to core {core} (no such core, or a cpuset forbids it): not pinned")
+        }
         RtRefused::Fifo { priority, errno } => {
             format!("SCHED_FIFO {priority} refused (errno {errno}): measured with normal scheduling")
         }
@@ -168,7 +170,11 @@ pub fn assess(r: &ProbeResult) -> Check {
     setup.extend(r.notes.iter().cloned());
     let setup = setup.join(", ");
     if r.samples == 0 {
-        return Check::warn(NAME, format!("no wake-ups measured ({setup})"), "run the probe for longer (--probe-seconds 10)");
+        return Check::warn(
+            NAME,
+            format!("no wake-ups measured ({setup})"),
+            "run the probe for longer (--probe-seconds 10)",
+        );
     }
     let mut detail = format!(
         "{} wake-ups every 4 ms ({setup}): late by median {}, p99 {}, p99.9 {}, max {}",
@@ -265,8 +271,15 @@ mod tests {
         r.notes = vec!["SCHED_FIFO 80 refused (errno 1): measured with normal scheduling".into()];
         let c = assess(&r);
         assert_eq!(c.status, Status::Fail);
-        assert!(c.detail.starts_with("2499 wake-ups every 4 ms (core 1, SCHED_OTHER, SCHED_FIFO 80 refused (errno 1)"), "{}", c.detail);
-        assert!(c.detail.ends_with("; 1 cycle passed unwoken (a wake-up a whole 4 ms cycle late: that answer would be late)"));
+        assert!(
+            c.detail.starts_with("2499 wake-ups every 4 ms (core 1, SCHED_OTHER, SCHED_FIFO 80 refused (errno 1)"),
+            "{}",
+            c.detail
+        );
+        assert!(
+            c.detail
+                .ends_with("; 1 cycle passed unwoken (a wake-up a whole 4 ms cycle late: that answer would be late)")
+        );
         assert!(c.fix.unwrap().starts_with("probe with SCHED_FIFO"));
         let mut none = result(0, 0, 0);
         none.samples = 0;

@@ -109,7 +109,10 @@ pub fn rtprio(host: &Host, cfg: &DaemonConfig) -> Check {
     match (&host.rtprio, caps) {
         (Ok(l), _) if l.soft.is_none_or(|s| s >= need) => Check::pass(
             NAME,
-            format!("RLIMIT_RTPRIO {} ≥ {need}: SCHED_FIFO allowed", l.soft.map_or("unlimited".to_owned(), |s| s.to_string())),
+            format!(
+                "RLIMIT_RTPRIO {} ≥ {need}: SCHED_FIFO allowed",
+                l.soft.map_or("unlimited".to_owned(), |s| s.to_string())
+            ),
         ),
         (Ok(l), Ok(_)) => Check::warn(
             NAME,
@@ -169,10 +172,11 @@ pub fn throttling(host: &Host, cfg: &DaemonConfig) -> Check {
         let t = host.root.read_trim(p).map_err(|e| e.to_string())?;
         t.parse().map_err(|_| format!("{p}: {t:?} is not a number"))
     };
-    let (runtime, period) = match (read("/proc/sys/kernel/sched_rt_runtime_us"), read("/proc/sys/kernel/sched_rt_period_us")) {
-        (Ok(r), Ok(p)) => (r, p),
-        (Err(e), _) | (_, Err(e)) => return Check::unknown(NAME, e),
-    };
+    let (runtime, period) =
+        match (read("/proc/sys/kernel/sched_rt_runtime_us"), read("/proc/sys/kernel/sched_rt_period_us")) {
+            (Ok(r), Ok(p)) => (r, p),
+            (Err(e), _) | (_, Err(e)) => return Check::unknown(NAME, e),
+        };
     if !cfg.threads.realtime {
         return Check::pass(NAME, "no SCHED_FIFO threads (threads.realtime = false)");
     }
@@ -221,17 +225,20 @@ mod tests {
     #[test]
     fn kernel_pass_and_warn() {
         let f = Fake::new();
-        f.file("/proc/version", "Linux version 6.1.0-18-rt-amd64 (debian-kernel@lists.debian.org) #1 SMP PREEMPT_RT Debian 6.1.76-1\n");
-        assert_eq!(
-            kernel(&f.host),
-            Check::pass("kernel", "PREEMPT_RT kernel 6.1.0-18-rt-amd64 (/proc/version)")
+        f.file(
+            "/proc/version",
+            "Linux version 6.1.0-18-rt-amd64 (debian-kernel@lists.debian.org) #1 SMP PREEMPT_RT Debian 6.1.76-1\n",
         );
+        assert_eq!(kernel(&f.host), Check::pass("kernel", "PREEMPT_RT kernel 6.1.0-18-rt-amd64 (/proc/version)"));
         f.file("/sys/kernel/realtime", "1\n");
         assert_eq!(kernel(&f.host).detail, "PREEMPT_RT kernel 6.1.0-18-rt-amd64 (/sys/kernel/realtime = 1)");
 
         let f = Fake::new();
-        f.file("/proc/version", "Linux version 6.8.0-45-generic (buildd@lcy02) #45-Ubuntu SMP PREEMPT_DYNAMIC Fri Aug 30\n")
-            .file("/proc/cmdline", "BOOT_IMAGE=/vmlinuz ro preempt=full\n");
+        f.file(
+            "/proc/version",
+            "Linux version 6.8.0-45-generic (buildd@lcy02) #45-Ubuntu SMP PREEMPT_DYNAMIC Fri Aug 30\n",
+        )
+        .file("/proc/cmdline", "BOOT_IMAGE=/vmlinuz ro preempt=full\n");
         let c = kernel(&f.host);
         assert_eq!(c.status, Status::Warn);
         assert_eq!(c.detail, "kernel 6.8.0-45-generic is PREEMPT_DYNAMIC (booted with preempt=full), not PREEMPT_RT");
@@ -255,14 +262,21 @@ mod tests {
         f.file("/proc/self/status", UNIT_CAPS);
         f.host.rtprio = Ok(Limit { soft: Some(0), hard: Some(0) });
         f.host.memlock = Ok(Limit { soft: Some(8 << 20), hard: Some(8 << 20) });
-        assert_eq!(rtprio(&f.host, &cfg), Check::pass("rtprio", "CAP_SYS_NICE in effect: SCHED_FIFO up to 99 (configured up to 80)"));
+        assert_eq!(
+            rtprio(&f.host, &cfg),
+            Check::pass("rtprio", "CAP_SYS_NICE in effect: SCHED_FIFO up to 99 (configured up to 80)")
+        );
         assert_eq!(memlock(&f.host, &cfg), Check::pass("memlock", "CAP_IPC_LOCK in effect: mlockall allowed"));
 
         // A login user: no capabilities, the distribution's limits.
         f.file("/proc/self/status", NO_CAPS);
         let c = rtprio(&f.host, &cfg);
         assert_eq!(c.status, Status::Warn);
-        assert!(c.detail.starts_with("this process may not use SCHED_FIFO 80 (RLIMIT_RTPRIO 0, no CAP_SYS_NICE)"), "{}", c.detail);
+        assert!(
+            c.detail.starts_with("this process may not use SCHED_FIFO 80 (RLIMIT_RTPRIO 0, no CAP_SYS_NICE)"),
+            "{}",
+            c.detail
+        );
         assert!(c.fix.unwrap().contains("LimitRTPRIO=99"));
         let c = memlock(&f.host, &cfg);
         assert_eq!(c.status, Status::Warn);
@@ -291,7 +305,8 @@ mod tests {
     #[test]
     fn throttling_pass_warn_and_fail() {
         let f = Fake::new();
-        f.file("/proc/sys/kernel/sched_rt_period_us", "1000000\n").file("/proc/sys/kernel/sched_rt_runtime_us", "950000\n");
+        f.file("/proc/sys/kernel/sched_rt_period_us", "1000000\n")
+            .file("/proc/sys/kernel/sched_rt_runtime_us", "950000\n");
         let mut cfg = DaemonConfig::default();
         assert_eq!(
             throttling(&f.host, &cfg),
@@ -308,7 +323,10 @@ mod tests {
         assert_eq!(throttling(&f.host, &cfg).status, Status::Pass);
         f.file("/proc/sys/kernel/sched_rt_runtime_us", "0\n");
         let c = throttling(&f.host, &cfg);
-        assert_eq!((c.status, c.detail.as_str()), (Status::Fail, "sched_rt_runtime_us = 0: SCHED_FIFO threads get no CPU time"));
+        assert_eq!(
+            (c.status, c.detail.as_str()),
+            (Status::Fail, "sched_rt_runtime_us = 0: SCHED_FIFO threads get no CPU time")
+        );
         let f = Fake::new();
         assert_eq!(throttling(&f.host, &cfg).status, Status::Warn);
     }

@@ -76,7 +76,8 @@ impl SysRoot {
     /// The names in a folder, sorted.
     pub fn list(&self, abs: &str) -> Result<Vec<String>, Unreadable> {
         let dir = std::fs::read_dir(self.path(abs)).map_err(|e| Self::unreadable(abs, &e))?;
-        let mut names: Vec<String> = dir.filter_map(|e| e.ok()).map(|e| e.file_name().to_string_lossy().into_owned()).collect();
+        let mut names: Vec<String> =
+            dir.filter_map(|e| e.ok()).map(|e| e.file_name().to_string_lossy().into_owned()).collect();
         names.sort();
         Ok(names)
     }
@@ -164,7 +165,8 @@ pub fn cmdline_param<'a>(cmdline: &'a str, key: &str) -> Option<&'a str> {
 /// The CPUs of an `isolcpus=` value, which may start with flags
 /// (`isolcpus=nohz,domain,managed_irq,2-3`).
 pub fn isolcpus_cpus(value: &str) -> Option<CpuSet> {
-    let cpus: Vec<&str> = value.split(',').skip_while(|p| p.chars().next().is_some_and(|c| c.is_ascii_alphabetic())).collect();
+    let cpus: Vec<&str> =
+        value.split(',').skip_while(|p| p.chars().next().is_some_and(|c| c.is_ascii_alphabetic())).collect();
     parse_cpu_list(&cpus.join(","))
 }
 

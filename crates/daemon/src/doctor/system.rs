@@ -33,11 +33,16 @@ pub fn swap(host: &Host, cfg: &DaemonConfig) -> Check {
     }
     let areas = areas.join(", ");
     if cfg.threads.realtime && memlock_allowed(host) == Some(true) {
-        Check::pass(NAME, format!("swap on ({areas}), but memory locking is allowed: the daemon's mlockall keeps it in RAM"))
+        Check::pass(
+            NAME,
+            format!("swap on ({areas}), but memory locking is allowed: the daemon's mlockall keeps it in RAM"),
+        )
     } else {
         Check::warn(
             NAME,
-            format!("swap on ({areas}) and the daemon's memory is not locked: its pages can be swapped out and fault back in mid-cycle"),
+            format!(
+                "swap on ({areas}) and the daemon's memory is not locked: its pages can be swapped out and fault back in mid-cycle"
+            ),
             "let the daemon lock its memory (threads.realtime = true, CAP_IPC_LOCK and LimitMEMLOCK=infinity as in deploy/topspin.service), or `sudo swapoff -a` and drop swap from /etc/fstab",
         )
     }
@@ -108,7 +113,11 @@ mod tests {
         f.file("/proc/swaps", &format!("{HEADER}/swap.img\t\t\t\tfile\t\t2097148\t\t0\t\t-2\n"));
         let c = swap(&f.host, &cfg);
         assert_eq!(c.status, Status::Warn);
-        assert!(c.detail.starts_with("swap on (/swap.img 2047 MiB) and the daemon's memory is not locked"), "{}", c.detail);
+        assert!(
+            c.detail.starts_with("swap on (/swap.img 2047 MiB) and the daemon's memory is not locked"),
+            "{}",
+            c.detail
+        );
         f.file("/proc/self/status", "CapEff:\t0000000000004000\n");
         let c = swap(&f.host, &cfg);
         assert_eq!(c.status, Status::Pass);
@@ -129,7 +138,10 @@ mod tests {
 
         f.host.clock_sync = Ok(ClockSync { synced: false, est_error_us: 16_000_000 });
         let c = time_sync(&f.host);
-        assert_eq!((c.status, c.detail.as_str()), (Status::Warn, "chronyd runs but the kernel clock is not synchronised yet"));
+        assert_eq!(
+            (c.status, c.detail.as_str()),
+            (Status::Warn, "chronyd runs but the kernel clock is not synchronised yet")
+        );
 
         f.file("/run/systemd/timesync/synchronized", "");
         assert_eq!(time_sync(&f.host).status, Status::Pass);
