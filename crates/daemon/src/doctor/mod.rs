@@ -19,11 +19,12 @@
 //! Each check is a plain function of a [`Host`] and the daemon's
 //! configuration returning a [`Check`]; only [`probe`] touches the clock
 //! and the scheduler. A failure is something that stops the loop from
-//! meeting its 4 ms cycle (a core that does not exist, an address no NIC
-//! holds, a link that is down, RT threads that get no CPU time, a wake-up
-//! a whole cycle late); a warning is something that costs margin or could
-//! not be checked. Where a file cannot be read the check says `warn` and
-//! which file, never panics.
+//! meeting its 4 ms cycle (a core that does not exist, a busy-polling RSI
+//! thread on a core another thread needs, an address no NIC holds, a link
+//! that is down, RT threads that get no CPU time, a wake-up a whole cycle
+//! late); a warning is something that costs margin or could not be
+//! checked. Where a file cannot be read the check says `warn` and which
+//! file, never panics.
 
 pub mod cpu;
 pub mod host;
@@ -115,7 +116,7 @@ impl Check {
         Check::warn(
             name,
             format!("could not check: {why}"),
-            "run `topspin doctor` on the robot PC itself (not in a container)",
+            "run `topspin doctor` on the robot PC itself, with /proc and /sys mounted (not in a restricted container)",
         )
     }
 }
