@@ -8,6 +8,7 @@ pub mod bench;
 pub mod check;
 pub mod crops;
 pub mod demo;
+pub mod doctor;
 pub mod eval;
 pub mod eval_paper;
 pub mod eval_real;
@@ -67,6 +68,11 @@ pub enum Command {
     /// Commissioning checks: `check tracker` listens on the tracker port.
     #[command(subcommand)]
     Check(check::CheckCommand),
+    /// Is this PC ready for the 4 ms RSI loop? Kernel, cores, rights, NIC,
+    /// swap, time sync and a wake-up jitter probe on the RSI core.
+    ///
+    /// Example: `topspin doctor --config /etc/topspin/topspin.toml`.
+    Doctor(doctor::DoctorArgs),
 }
 
 /// Offline commands end quietly when their reader goes away
@@ -100,6 +106,7 @@ pub fn main() -> i32 {
         Command::Logo(a) => logo::run(a),
         Command::Replay(a) => replay::run(a),
         Command::Check(c) => check::run(c),
+        Command::Doctor(a) => doctor::run(a),
     };
     match result {
         Ok(()) => 0,

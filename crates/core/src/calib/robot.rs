@@ -473,6 +473,27 @@ mod tests {
     }
 
     #[test]
+    fn servo_is_whole_cycles_and_bounded_and_old_files_get_the_assumption() {
+        let f = default_file();
+        assert_eq!(f.servo.dead_time_cycles(f.rsi.cycle_ms), 3);
+        assert!((f.servo.lag_s() - 0.015).abs() < 1e-12);
+        for (dead, lag, key) in [
+            (10.0, 15.0, "servo.dead_time_ms (whole cycles, 0-100 ms)"),
+            (-4.0, 15.0, "servo.dead_time_ms (whole cycles, 0-100 ms)"),
+            (f64::NAN, 15.0, "servo.dead_time_ms (whole cycles, 0-100 ms)"),
+            (12.0, -1.0, "servo.lag_ms (0-200 ms)"),
+            (12.0, f64::INFINITY, "servo.lag_ms (0-200 ms)"),
+        ] {
+            let mut g = f.clone();
+            g.servo = ServoModel { dead_time_ms: dead, lag_ms: lag };
+            assert_eq!(g.validate().unwrap_err().key, key, "{dead} {lag}");
+        }
+        let text = include_str!("../../../../calib/robot.toml");
+        let old: RobotFile = toml::from_str(&text[..text.find("[servo]").unwrap()]).unwrap();
+        assert_eq!(old.servo, f.servo);
+    }
+
+    #[test]
     fn files_from_before_the_joints_section_still_load() {
         // A version-1 file as recordings made before `[joints]` carry it.
         let text = include_str!("../../../../calib/robot.toml");

@@ -92,14 +92,6 @@ impl fmt::Display for StopReason {
     }
 }
 
-/// How the axes follow the command (`calib/robot.toml` `[servo]`).
-#[derive(Copy, Clone, Debug, PartialEq)]
-pub struct Servo {
-    /// Whole cycles between the correction's cycle and the drives.
-    pub dead_time_cycles: u32,
-    /// First-order lag time constant per axis, s (0: none).
-    pub lag_s: f64,
-}
 
 /// What became of an offered answer.
 #[derive(Copy, Clone, Debug, PartialEq, Eq)]
@@ -133,8 +125,11 @@ pub struct ControllerConfig {
     pub start_joints: Joints,
     /// The arm: kinematics and axis limits.
     pub arm: Arm,
-    /// Dead time and lag.
-    pub servo: Servo,
+    /// Whole cycles between the correction's cycle and the drives
+    /// (`calib/robot.toml` `[servo]`).
+    pub dead_time_cycles: u32,
+    /// First-order lag time constant per axis, s (0: none).
+    pub lag_s: f64,
     /// Stop on an axis over its speed or acceleration limit ("command
     /// gear torque"); off: such cycles are counted (`rates_over`).
     pub stop_on_axis_rates: bool,
@@ -202,10 +197,10 @@ impl MockController {
     /// A controller at its start pose. Panics if the dead time exceeds
     /// [`MAX_DEAD_TIME_CYCLES`] (configurations are checked before).
     pub fn new(cfg: ControllerConfig) -> Self {
-        assert!((cfg.servo.dead_time_cycles as usize) < MAX_DEAD_TIME_CYCLES, "dead time too long");
-        let line = VecDeque::from(vec![cfg.start_joints; cfg.servo.dead_time_cycles as usize]);
+        assert!((cfg.dead_time_cycles as usize) < MAX_DEAD_TIME_CYCLES, "dead time too long");
+        let line = VecDeque::from(vec![cfg.start_joints; cfg.dead_time_cycles as usize]);
         let dt = cfg.cycle_ms as f64 * 1e-3;
-        let lag_step = if cfg.servo.lag_s > 0.0 { 1.0 - (-dt / cfg.servo.lag_s).exp() } else { 1.0 };
+        let lag_step = if cfg.lag_s > 0.0 { 1.0 - (-dt / cfg.lag_s).exp() } else { 1.0 };
         MockController {
             ipoc: cfg.first_ipoc,
             correction: [0.0; 6],
@@ -386,7 +381,7 @@ impl MockController {
     /// actual speed and acceleration are checked against the limits.
     fn follow(&mut self) {
         let dt = self.cfg.cycle_ms as f64 * 1e-3;
-        let target = if self.cfg.servo.dead_time_cycles == 0 {
+        let target = if self.cfg.dead_time_cycles == 0 {
             self.q_cmd
         } else {
             let oldest = self.line.pop_front().unwrap_or(self.q_cmd);

@@ -11,7 +11,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::thread::JoinHandle;
 
 use super::config::{ContextConfig, EthernetConfig, RsiFileError};
-use super::controller::{ControllerConfig, CorrMode, MockController, PathSample, Servo, StopReason, Verdict};
+use super::controller::{ControllerConfig, CorrMode, MockController, PathSample, StopReason, Verdict};
 use super::faults::{FaultInjector, Faults, Link, MAX_DATAGRAM, UdpLink};
 use topspin_core::calib::RobotFile;
 use topspin_core::time::{Duration, Instant};
@@ -64,10 +64,8 @@ impl MockKrcConfig {
             start: [h.xyz_m[0] * 1e3, h.xyz_m[1] * 1e3, h.xyz_m[2] * 1e3, h.abc_deg[0], h.abc_deg[1], h.abc_deg[2]],
             start_joints: robot.home_joints(&arm).expect("a validated robot.toml has home joints"),
             arm,
-            servo: Servo {
-                dead_time_cycles: robot.servo.dead_time_cycles(robot.rsi.cycle_ms),
-                lag_s: robot.servo.lag_s(),
-            },
+            dead_time_cycles: robot.servo.dead_time_cycles(robot.rsi.cycle_ms),
+            lag_s: robot.servo.lag_s(),
             stop_on_axis_rates: false,
             lower_mm: context.lower_mm,
             upper_mm: context.upper_mm,
