@@ -10,11 +10,6 @@ use crate::plan::EulerZyx;
 
 use super::Pose6;
 
-/// Fraction of the cell's limits the generator plans with; the safety
-/// filter enforces the full limits, so a well-behaved stroke never touches
-/// them.
-pub(crate) const GENERATOR_LIMIT_FRACTION: f64 = 0.95;
-
 /// Everything motion needs to know about the cell, in SI.
 #[derive(Clone, Debug, PartialEq)]
 pub struct MotionLimits {
@@ -44,11 +39,6 @@ pub struct MotionLimits {
     pub arm: Arm,
     /// The joints at home.
     pub home_joints: Joints,
-    /// Keep strokes within the axes' speeds and accelerations (slow them
-    /// down, or refuse them). Off by default for now: the Cartesian
-    /// strokes the hitting window asks for exceed the KR 6 R900's axis
-    /// rates, and the slowed strokes miss (ARCHITECTURE.md, issue 16).
-    pub check_joint_rates: bool,
 }
 
 impl MotionLimits {
@@ -73,7 +63,6 @@ impl MotionLimits {
             base_xyz: r.cell.base_in_table_xyz_m,
             arm: r.arm(),
             home_joints: r.home_joints(&r.arm()).expect("a validated robot.toml has home joints"),
-            check_joint_rates: false,
         }
     }
 

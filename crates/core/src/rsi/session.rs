@@ -32,6 +32,7 @@ use heapless::Deque;
 
 use super::codec::{CodecError, KukaPose, RobFrame, SenFrame, check_text};
 use crate::calib::Calibration;
+use crate::kinematics::Joints;
 use crate::motion::generator::Phase;
 use crate::motion::limits::unwrap_near;
 use crate::motion::{MotionLimits, PlanRejected, Pose6, SafetyFilter, StrokeGenerator};
@@ -264,6 +265,9 @@ pub struct RsiSession {
     last_rx: Option<Instant>,
     last_correction: KukaPose,
     last_command: Pose6,
+    /// The generator's joints at the last setpoint (for the feed-forward).
+    last_joints: Joints,
+    last_joints_valid: bool,
     last_phase: Phase,
     clamping: bool,
     pending: Option<StrikePlan>,
@@ -300,6 +304,8 @@ impl RsiSession {
             last_rx: None,
             last_correction: KukaPose::default(),
             last_command: home,
+            last_joints: Joints([0.0; 6]),
+            last_joints_valid: false,
             last_phase: Phase::Hold,
             clamping: false,
             pending: None,
@@ -466,6 +472,7 @@ impl RsiSession {
         self.safety.reset(self.start);
         self.last_correction = KukaPose::default();
         self.last_command = self.start;
+        self.last_joints_valid = false;
         self.clamping = false;
         self.state = SessionState::Running;
         self.push(SessionEvent::Started { ipoc: rob.ipoc, off_home });
@@ -531,8 +538,20 @@ impl RsiSession {
             self.last_phase = phase;
             self.push(SessionEvent::PhaseChanged(phase));
         }
+        // The lag's feed-forward, in joint space where the drives lag (the
+        // generator's joints; the Cartesian pose where the safety filter
+        // changed the setpoint).
         let gain = self.cfg.servo.feed_forward_gain(self.cfg.limits.dt);
-        let sent: Pose6 = core::array::from_fn(|i| cmd[i] + gain * (cmd[i] - self.last_command[i]));
+        let q = self.generator.joints();
+        let sent: Pose6 = if gain > 0.0 && !changed && self.last_joints_valid {
+            let lead = Joints(core::array::from_fn(|i| q.0[i] + gain * (q.0[i] - self.last_joints.0[i])));
+            let p = self.cfg.limits.arm.tcp(&lead).to_pose6();
+            core::array::from_fn(|i| if i < 3 { p[i] } else { unwrap_near(p[i], cmd[i]) })
+        } else {
+            core::array::from_fn(|i| cmd[i] + gain * (cmd[i] - self.last_command[i]))
+        };
+        self.last_joints = q;
+        self.last_joints_valid = !changed;
         let mut k = [0.0; 6];
         for i in 0..3 {
             k[i] = (sent[i] - self.start[i]) * 1e3;
