@@ -13,6 +13,11 @@ pub struct DemoArgs {
     /// Number of launcher balls (cycling through the nine settings).
     #[arg(long, default_value_t = 9)]
     pub balls: usize,
+    /// Command the robot as if it had no dead time and lag (the mock KR C4
+    /// still has them: calib/robot.toml [servo]), to see what the
+    /// compensation is worth.
+    #[arg(long)]
+    pub no_lag_comp: bool,
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
     /// Tracker noise per axis, mm.
@@ -74,6 +79,7 @@ pub fn run(a: DemoArgs) -> anyhow::Result<()> {
     }
     let cal = Calibration::default_cell();
     let mut runtime = topspin_daemon::runtime::daemon::RuntimeConfig::loopback();
+    runtime.servo_compensation = !a.no_lag_comp;
     if let Some(method) = a.logo {
         runtime.logo = Some(topspin_daemon::runtime::daemon::LogoRuntime {
             bind: "127.0.0.1:0".parse().expect("literal"),

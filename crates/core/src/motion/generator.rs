@@ -74,7 +74,7 @@ pub(crate) const BALL_SPEED_AT_HIT: f64 = 4.0;
 const RETRY_NUDGES_S: [f64; 4] = [-0.0003, 0.0003, -0.0007, 0.0007];
 /// Share of each axis's speed and acceleration a stroke may use (the rest
 /// absorbs the lag's feed-forward and the refinements to come).
-pub const JOINT_LIMIT_FRACTION: f64 = 0.9;
+pub const JOINT_LIMIT_FRACTION: f64 = 0.97;
 /// Time for an axis to reach full acceleration (sets the jerk limit), s.
 pub const JERK_RAMP_S: f64 = 0.0125;
 /// Share of the stroke's limits for follow-through and return.
@@ -670,8 +670,10 @@ impl StrokeGenerator {
             // An axis already resting at its target is left out: Ruckig's
             // time synchronisation can fail on such (numerically) empty
             // moves and return a later duration for all axes.
-            let resting =
-                (pos[i] - self.q[i]).abs() < 1e-7 && self.qd[i].abs() < 1e-7 && self.qdd[i].abs() < 1e-6 && vel[i] == 0.0;
+            let resting = (pos[i] - self.q[i]).abs() < 1e-7
+                && self.qd[i].abs() < 1e-7
+                && self.qdd[i].abs() < 1e-6
+                && vel[i] == 0.0;
             self.input.enabled[i] = !resting;
             if resting {
                 self.input.current_position[i] = pos[i];

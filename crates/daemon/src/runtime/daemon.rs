@@ -230,8 +230,8 @@ impl Daemon {
         let tracker_addr = tracker_socket.local_addr()?;
         let mut session_cfg = SessionConfig::from_calibration(cal, &cfg.sentype);
         session_cfg.servo.enabled = cfg.servo_compensation;
-        let session = RsiSession::new(session_cfg)
-            .map_err(|e| io::Error::new(io::ErrorKind::InvalidInput, e.to_string()))?;
+        let session =
+            RsiSession::new(session_cfg).map_err(|e| io::Error::new(io::ErrorKind::InvalidInput, e.to_string()))?;
         let server = RsiServer::bind(cfg.rsi_bind, session, cfg.rsi_wait)?;
         let rsi_addr = server.local_addr()?;
 

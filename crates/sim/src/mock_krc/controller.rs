@@ -92,7 +92,6 @@ impl fmt::Display for StopReason {
     }
 }
 
-
 /// What became of an offered answer.
 #[derive(Copy, Clone, Debug, PartialEq, Eq)]
 pub enum Verdict {
@@ -198,7 +197,12 @@ impl MockController {
     /// [`MAX_DEAD_TIME_CYCLES`] (configurations are checked before).
     pub fn new(cfg: ControllerConfig) -> Self {
         assert!((cfg.dead_time_cycles as usize) < MAX_DEAD_TIME_CYCLES, "dead time too long");
-        let line = VecDeque::from(vec![cfg.start_joints; cfg.dead_time_cycles as usize]);
+        // The joints of the start pose: the solution nearest `start_joints`
+        // (a robot restarted off home stands where it stopped).
+        let c = &cfg.start;
+        let start = Pose::from_xyz_abc([c[0], c[1], c[2]].map(|x| x * 1e-3), [c[3], c[4], c[5]].map(f64::to_radians));
+        let q0 = cfg.arm.inverse_near(&start, &cfg.start_joints).unwrap_or(cfg.start_joints);
+        let line = VecDeque::from(vec![q0; cfg.dead_time_cycles as usize]);
         let dt = cfg.cycle_ms as f64 * 1e-3;
         let lag_step = if cfg.lag_s > 0.0 { 1.0 - (-dt / cfg.lag_s).exp() } else { 1.0 };
         MockController {
@@ -206,9 +210,9 @@ impl MockController {
             correction: [0.0; 6],
             commanded: cfg.start,
             actual: cfg.start,
-            q_cmd: cfg.start_joints,
+            q_cmd: q0,
             line,
-            q_act: cfg.start_joints,
+            q_act: q0,
             qd_act: [0.0; AXES],
             lag_step,
             answered: None,

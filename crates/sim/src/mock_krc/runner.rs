@@ -155,11 +155,7 @@ impl MockResult {
             "a6_deg",
         ])?;
         for s in &self.path {
-            let mut rec = vec![
-                format!("{:.6}", s.t.as_secs_f64()),
-                s.ipoc.to_string(),
-                (s.on_time as u8).to_string(),
-            ];
+            let mut rec = vec![format!("{:.6}", s.t.as_secs_f64()), s.ipoc.to_string(), (s.on_time as u8).to_string()];
             rec.extend(s.commanded.iter().map(|x| format!("{x:.4}")));
             rec.extend(s.actual.iter().map(|x| format!("{x:.4}")));
             rec.extend(s.joints.iter().map(|x| format!("{x:.4}")));
