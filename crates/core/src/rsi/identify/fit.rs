@@ -37,6 +37,9 @@ pub const MAX_DEAD_TIME_S: f64 = 0.12;
 const LAG_GRID: usize = 48;
 /// The shortest non-zero τ on the grid, in cycles.
 const LAG_GRID_MIN_CYCLES: f64 = 0.05;
+/// Below τ = T / 7 (a = e⁻⁷ < 0.1 %) a lag changes the response by less
+/// than a thousandth of a step: not resolved, reported as 0.
+const MIN_RESOLVED_A: f64 = 9.118_819_655_545_162e-4;
 /// Golden-section iterations (the bracket shrinks by 0.618 each).
 const GOLDEN_ITERATIONS: usize = 60;
 
@@ -203,7 +206,8 @@ fn minimize_lag(dt: f64, mut cost: impl FnMut(f64) -> f64) -> (f64, f64) {
         }
     }
     let (a, c) = if c1 < c2 { (m1, c1) } else { (m2, c2) };
-    if costs[best] <= c { (a_of(taus[best], dt), costs[best]) } else { (a, c) }
+    let (a, c) = if costs[best] <= c { (a_of(taus[best], dt), costs[best]) } else { (a, c) };
+    if a < MIN_RESOLVED_A { (0.0, costs[0]) } else { (a, c) }
 }
 
 /// Fits d in 0..=`max_dead_time_cycles` and τ (see the module doc).
@@ -301,8 +305,8 @@ pub fn fit(trace: &Trace, max_dead_time_cycles: usize) -> Result<ServoFit, FitEr
         dt / (a * ln * ln) * var_a.sqrt()
     } else {
         // τ at its bound 0, where dτ/da = 0: one-sided, the τ of a at one
-        // standard deviation.
-        tau_of(var_a.sqrt().min(0.999), dt)
+        // standard deviation, at least the resolution T / 7.
+        tau_of(var_a.sqrt().clamp(MIN_RESOLVED_A, 0.999), dt)
     };
     let sigma2_eff = (sigma2 * inflation).max(f64::MIN_POSITIVE);
     let weights: Vec<f64> = rss_by_dead_time.iter().map(|r| (-(r - rss) / (2.0 * sigma2_eff)).exp()).collect();

@@ -1,0 +1,114 @@
+//! `topspin identify` as a user runs it: the binary on a loopback port,
+//! the mock KR C4 (in this process, on its own thread and the wall clock)
+//! sending `<Rob>` every 4 ms with the controller's real deadline. The
+//! JSON's dead time and lag are checked against the mock's configuration;
+//! late answers (a loaded machine) are allowed and must not matter — the
+//! mock's late limit is lifted so that they cannot stop the run. Exit 2
+//! and one line for unusable input, exit 1 with the reason when nothing
+//! comes.
+
+#![allow(clippy::disallowed_methods)] // a process test: it waits on the wall clock
+
+use std::net::UdpSocket;
+use std::process::{Command, Output, Stdio};
+
+use topspin_sim::mock_krc::{self, MockKrcConfig};
+
+fn topspin() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_topspin"))
+}
+
+fn free_port() -> u16 {
+    UdpSocket::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
+}
+
+/// Runs `topspin identify … --json` against a mock set up by `servo`.
+fn identify_against_mock(extra: &[&str], servo: impl FnOnce(&mut MockKrcConfig)) -> (Output, mock_krc::MockResult) {
+    let port = free_port();
+    let addr = format!("127.0.0.1:{port}");
+    let mut args = vec!["identify", "--bind", &addr, "--json", "--wait-s", "20", "--hold-s", "0.5"];
+    args.extend_from_slice(extra);
+    let child = topspin().args(&args).stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().unwrap();
+    let mut cfg = MockKrcConfig::default_cell().unwrap();
+    cfg.sensor = addr.parse().unwrap();
+    cfg.bind = "127.0.0.1:0".parse().unwrap();
+    cfg.controller.late_limit = u64::MAX;
+    servo(&mut cfg);
+    // Give the child time to bind; requests before that are lost, which
+    // the identifier takes as the start a little later.
+    std::thread::sleep(std::time::Duration::from_millis(300));
+    let mock = mock_krc::spawn(cfg).unwrap();
+    let out = child.wait_with_output().unwrap();
+    let result = mock.stop().unwrap();
+    (out, result)
+}
+
+fn json(out: &Output) -> serde_json::Value {
+    assert!(
+        out.status.success(),
+        "exit {:?}: {}\n{}",
+        out.status,
+        String::from_utf8_lossy(&out.stderr),
+        String::from_utf8_lossy(&out.stdout)
+    );
+    serde_json::from_slice(&out.stdout).unwrap()
+}
+
+#[test]
+fn the_ideal_mock_has_no_dead_time_and_no_lag() {
+    let (out, mock) = identify_against_mock(&["--axis", "z", "--seconds", "3"], |_| {});
+    let r = json(&out);
+    eprintln!(
+        "ideal mock: dead time {} ms, lag {} ± {} ms, fit {} %, late {} (mock late {}), {} cycles",
+        r["dead_time_ms"], r["lag_ms"], r["lag_std_ms"], r["fit_percent"], r["late"], mock.late, r["cycles"]
+    );
+    assert_eq!(r["dead_time_cycles"], 0, "{r}");
+    assert_eq!(r["dead_time_ms"], 0.0, "{r}");
+    assert!(r["lag_ms"].as_f64().unwrap() < 0.5, "{r}");
+    assert_eq!(r["cycle_ms"], 4);
+    assert_eq!(r["ended"], "hold_elapsed");
+    assert!(r["gain"][2].as_f64().is_some_and(|g| (g - 1.0).abs() < 0.01) && r["gain"][0].is_null(), "{r}");
+    assert_eq!(r["calib_toml"], "[servo]\ndead_time_ms = 0.0\nlag_ms = 0.0\n");
+    assert!(r["cycles"].as_u64().unwrap() >= 750, "{r}");
+}
+
+#[test]
+fn no_controller_is_a_failure_with_its_reason() {
+    let port = free_port();
+    let out = topspin()
+        .args(["identify", "--bind", &format!("127.0.0.1:{port}"), "--wait-s", "0.3", "--axis", "x", "--seconds", "3"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&out.stderr);
+    let last = err.trim().lines().last().unwrap();
+    assert!(last.starts_with("topspin: no request from the controller on 127.0.0.1:"), "{err}");
+}
+
+#[test]
+fn unusable_input_exits_2_with_one_line() {
+    for (args, says) in [
+        (vec!["--bind", "nonsense"], "--bind nonsense"),
+        (vec!["--axis", "w"], "--axis w"),
+        (vec!["--amplitude-mm", "50"], "amplitude 50 mm"),
+        (vec!["--amplitude-mm", "abc"], "--amplitude-mm"),
+        (vec!["--seconds", "1"], "1 s: must be within"),
+        (vec!["--wait-s", "0"], "--wait-s 0"),
+        (vec!["--config", "/nonexistent/topspin.toml"], "/nonexistent/topspin.toml"),
+        (vec!["--bind", "192.0.2.1:49152"], "RSI port 192.0.2.1:49152"),
+    ] {
+        let out = topspin().arg("identify").args(&args).output().unwrap();
+        assert_eq!(out.status.code(), Some(2), "{args:?}");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(err.trim().lines().count(), 1, "{args:?}: {err}");
+        assert!(err.contains(says), "{args:?}: {err}");
+    }
+}
+
+#[test]
+fn help_has_an_example() {
+    let out = topspin().args(["identify", "--help"]).output().unwrap();
+    assert!(out.status.success());
+    let help = String::from_utf8_lossy(&out.stdout);
+    assert!(help.contains("Example") && help.contains("topspin identify --axis all"), "{help}");
+}
