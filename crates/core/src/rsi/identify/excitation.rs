@@ -191,8 +191,7 @@ impl Excitation {
         let block_len = cycles(s) / n_axes;
         let mut lfsr = LFSR_SEED;
         let mut samples = vec![[0.0; 3]; block_len * n_axes];
-        let mut k = 0;
-        for (axis, _) in flags.iter().enumerate().filter(|(_, f)| **f) {
+        for (k, (axis, _)) in flags.iter().enumerate().filter(|(_, f)| **f).enumerate() {
             let mut b = Block { v: fixed.v.clone(), x: fixed.x, dt };
             loop {
                 let r = lfsr_next(&mut lfsr);
@@ -214,7 +213,6 @@ impl Excitation {
             for (i, x) in b.v.iter().take(block_len).enumerate() {
                 samples[k * block_len + i][axis] = *x;
             }
-            k += 1;
         }
         let max_step_mm = MAX_SPEED_MM_S * dt;
         Ok(Excitation { cfg, samples, lead_in_cycles: cycles(LEAD_IN_S), max_step_mm })

@@ -133,7 +133,7 @@ impl Sums {
     /// (g, c, RSS) of y ≈ g x + c.
     fn solve(&self) -> (f64, f64, f64) {
         let det = self.xx * self.n - self.x * self.x;
-        if !(det.abs() > 1e-12 * (self.xx * self.n).max(1e-300)) {
+        if det.is_nan() || det.abs() <= 1e-12 * (self.xx * self.n).max(1e-300) {
             let c = if self.n > 0.0 { self.y / self.n } else { 0.0 };
             return (0.0, c, (self.yy - c * self.y).max(0.0));
         }
@@ -213,7 +213,7 @@ fn minimize_lag(dt: f64, mut cost: impl FnMut(f64) -> f64) -> (f64, f64) {
 /// Fits d in 0..=`max_dead_time_cycles` and τ (see the module doc).
 pub fn fit(trace: &Trace, max_dead_time_cycles: usize) -> Result<ServoFit, FitError> {
     let dt = trace.cycle_s;
-    if trace.u.len() != trace.y.len() || !trace.excited.iter().any(|e| *e) || !(dt > 0.0) {
+    if trace.u.len() != trace.y.len() || !trace.excited.iter().any(|e| *e) || dt.is_nan() || dt <= 0.0 {
         return Err(FitError::BadTrace);
     }
     let mut axes = Vec::new();
@@ -222,7 +222,7 @@ pub fn fit(trace: &Trace, max_dead_time_cycles: usize) -> Result<ServoFit, FitEr
         let seen: Vec<bool> = trace.y.iter().map(|v| v.is_some_and(|p| p[axis].is_finite())).collect();
         let y: Vec<f64> = trace.y.iter().map(|v| v.map_or(0.0, |p| p[axis])).collect();
         let (lo, hi) = u.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), x| (l.min(*x), h.max(*x)));
-        if !(hi > lo) {
+        if hi <= lo {
             return Err(FitError::NoExcitation { axis });
         }
         axes.push(AxisData { axis, u, y, seen });

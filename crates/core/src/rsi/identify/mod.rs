@@ -544,7 +544,7 @@ impl Identifier {
         for axis in (0..3).filter(|i| trace.excited[*i]) {
             let (u_ptp, u_rms) = spread(trace.u.iter().map(|v| v[axis]));
             let (y_ptp, y_rms) = spread(trace.y.iter().flatten().map(|v| v[axis]));
-            if !(y_rms >= MIN_MOTION_RATIO * u_rms) {
+            if y_rms.is_nan() || y_rms < MIN_MOTION_RATIO * u_rms {
                 return Err(IdentifyError::DidNotMove { axis: AXIS_NAMES[axis], moved_mm: y_ptp, commanded_mm: u_ptp });
             }
         }
@@ -556,7 +556,7 @@ impl Identifier {
                 return Err(IdentifyError::Gain { axis: AXIS_NAMES[axis], gain: g });
             }
         }
-        if !(f.fit_percent >= MIN_FIT_PERCENT) {
+        if f.fit_percent.is_nan() || f.fit_percent < MIN_FIT_PERCENT {
             return Err(IdentifyError::PoorFit { fit_percent: f.fit_percent, rms_mm: f.rms_mm });
         }
         let cycle_ms = self.cfg.cycle_ms as f64;

@@ -1,6 +1,8 @@
 //! The identifier against an in-memory robot with a known dead time and
 //! lag, on a virtual clock, through the real codec both ways.
 
+#![allow(clippy::needless_range_loop)] // parallel per-axis arrays
+
 use std::collections::VecDeque;
 
 use rand::{Rng, SeedableRng};
@@ -31,7 +33,6 @@ struct Faults {
 /// of cycle k, reaches the servo `d` cycles later, and the TCP follows it
 /// with a first-order lag (exact for a correction held over the cycle).
 struct Plant {
-    d: usize,
     tau: f64,
     gain: f64,
     cycle_ms: u32,
@@ -51,7 +52,6 @@ struct Plant {
 impl Plant {
     fn new(d: usize, tau: f64, noise: f64, seed: u64) -> Self {
         Plant {
-            d,
             tau,
             gain: 1.0,
             cycle_ms: 4,
