@@ -34,6 +34,9 @@ struct Faults {
 /// with a first-order lag (exact for a correction held over the cycle).
 struct Plant {
     tau: f64,
+    /// A second lag after the first (0: none): a servo the model does not
+    /// describe exactly.
+    tau2: f64,
     gain: f64,
     cycle_ms: u32,
     noise: f64,
@@ -42,6 +45,7 @@ struct Plant {
     correction: [f64; 3],
     line: VecDeque<[f64; 3]>,
     y: [f64; 3],
+    y1: [f64; 3],
     late: u64,
     answered: Option<[f64; 3]>,
     /// The correction applied in each cycle.
@@ -53,6 +57,7 @@ impl Plant {
     fn new(d: usize, tau: f64, noise: f64, seed: u64) -> Self {
         Plant {
             tau,
+            tau2: 0.0,
             gain: 1.0,
             cycle_ms: 4,
             noise,
@@ -61,6 +66,7 @@ impl Plant {
             correction: [0.0; 3],
             line: VecDeque::from(vec![[0.0; 3]; d]),
             y: [0.0; 3],
+            y1: [0.0; 3],
             late: 0,
             answered: None,
             applied: Vec::new(),
@@ -104,9 +110,22 @@ impl Plant {
         self.applied.push(self.correction);
         self.line.push_back(self.correction);
         let u = self.line.pop_front().unwrap();
-        let a = if self.tau > 0.0 { (-(self.cycle_ms as f64 * 1e-3) / self.tau).exp() } else { 0.0 };
-        for i in 0..3 {
-            self.y[i] = a * self.y[i] + (1.0 - a) * self.gain * u[i];
+        let dt = self.cycle_ms as f64 * 1e-3;
+        let a = if self.tau > 0.0 { (-dt / self.tau).exp() } else { 0.0 };
+        if self.tau2 > 0.0 {
+            // Two lags in series, integrated finely within the cycle.
+            let steps = 64;
+            let h = dt / steps as f64;
+            for _ in 0..steps {
+                for i in 0..3 {
+                    self.y1[i] += h * (self.gain * u[i] - self.y1[i]) / self.tau;
+                    self.y[i] += h * (self.y1[i] - self.y[i]) / self.tau2;
+                }
+            }
+        } else {
+            for i in 0..3 {
+                self.y[i] = a * self.y[i] + (1.0 - a) * self.gain * u[i];
+            }
         }
         self.ipoc += self.cycle_ms as u64;
     }
@@ -267,6 +286,25 @@ fn ignoring_late_answers_would_have_cost_accuracy() {
     }
     let bad = fit::fit(&naive, 30).unwrap();
     assert!(bad.rms_mm > 20.0 * good.fit.rms_mm.max(1e-4), "{} vs {}", bad.rms_mm, good.fit.rms_mm);
+}
+
+#[test]
+fn a_second_order_servo_keeps_its_total_delay() {
+    // Not the model: two lags (10 and 5 ms) after 2 cycles. The fit is
+    // still good, and its total delay d·T + τ is the plant's mean delay
+    // 2·T + τ₁ + τ₂ = 23 ms within one cycle.
+    let mut p = Plant::new(2, 0.010, 0.02, 4);
+    p.tau2 = 0.005;
+    let mut id = identifier(AxisChoice::X, 5.0);
+    run(&mut p, &mut id, Faults::default(), 4);
+    let r = id.finish().unwrap();
+    let total = r.dead_time_ms + r.lag_ms;
+    eprintln!(
+        "two lags 10 + 5 ms after 2 cycles → d {} τ {:.2} ms, total {total:.2} ms, fit {:.2} %, rms {:.4} mm",
+        r.fit.dead_time_cycles, r.lag_ms, r.fit.fit_percent, r.fit.rms_mm
+    );
+    assert!((total - 23.0).abs() < 4.0, "{total}");
+    assert!(r.fit.fit_percent > 95.0, "{}", r.fit.fit_percent);
 }
 
 #[test]
