@@ -83,6 +83,15 @@ fn no_controller_is_a_failure_with_its_reason() {
     let err = String::from_utf8_lossy(&out.stderr);
     let last = err.trim().lines().last().unwrap();
     assert!(last.starts_with("topspin: no request from the controller on 127.0.0.1:"), "{err}");
+    // For scripts: the reason and the counters as JSON too.
+    let out = topspin()
+        .args(["identify", "--bind", &format!("127.0.0.1:{port}"), "--wait-s", "0.3", "--json", "--axis", "y"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    let r: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert!(r["error"].as_str().unwrap().starts_with("no request from the controller"), "{r}");
+    assert_eq!((r["ended"].as_str(), r["requests"].as_u64(), r["lag_ms"].is_null()), (Some("no_request"), Some(0), true));
 }
 
 #[test]
