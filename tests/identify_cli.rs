@@ -91,7 +91,10 @@ fn no_controller_is_a_failure_with_its_reason() {
     assert_eq!(out.status.code(), Some(1));
     let r: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert!(r["error"].as_str().unwrap().starts_with("no request from the controller"), "{r}");
-    assert_eq!((r["ended"].as_str(), r["requests"].as_u64(), r["lag_ms"].is_null()), (Some("no_request"), Some(0), true));
+    assert_eq!(
+        (r["ended"].as_str(), r["requests"].as_u64(), r["lag_ms"].is_null()),
+        (Some("no_request"), Some(0), true)
+    );
 }
 
 #[test]

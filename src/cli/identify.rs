@@ -96,6 +96,14 @@ struct Report {
     seconds: f64,
     ended: &'static str,
     calib_toml: Option<String>,
+    /// `[servo]` of the calibration in use, for comparison.
+    calib_now: Option<ServoNow>,
+}
+
+#[derive(Debug, Serialize)]
+struct ServoNow {
+    dead_time_ms: f64,
+    lag_ms: f64,
 }
 
 fn parse_axis(s: &str) -> Result<AxisChoice, BadInput> {
@@ -180,6 +188,8 @@ pub fn run(a: IdentifyArgs) -> anyhow::Result<()> {
         _ => id.finish().map_err(|e| format!("identification failed: {e}")),
     };
     let mut report = base_report(&a, &id, &outcome, cycle_ms);
+    let servo = &cal.robot.servo;
+    report.calib_now = Some(ServoNow { dead_time_ms: servo.dead_time_ms, lag_ms: servo.lag_ms });
     match result {
         Ok(r) => {
             fill(&mut report, &r);
@@ -187,6 +197,10 @@ pub fn run(a: IdentifyArgs) -> anyhow::Result<()> {
                 println!("{}", serde_json::to_string_pretty(&report)?);
             } else {
                 print!("{}", text(&a, &r));
+                println!(
+                    "(the calibration in use has dead_time_ms = {:.1}, lag_ms = {:.1})",
+                    servo.dead_time_ms, servo.lag_ms
+                );
             }
             Ok(())
         }

@@ -8,6 +8,7 @@ pub mod bench;
 pub mod check;
 pub mod crops;
 pub mod demo;
+pub mod doctor;
 pub mod eval;
 pub mod eval_paper;
 pub mod eval_real;
@@ -75,6 +76,11 @@ pub enum Command {
     /// Example: `topspin identify --axis all --amplitude-mm 3` (T1, reduced
     /// override; see rsi/README.md), then select and start topspin_rsi.src.
     Identify(identify::IdentifyArgs),
+    /// Is this PC ready for the 4 ms RSI loop? Kernel, cores, rights, NIC,
+    /// swap, time sync and a wake-up jitter probe on the RSI core.
+    ///
+    /// Example: `topspin doctor --config /etc/topspin/topspin.toml`.
+    Doctor(doctor::DoctorArgs),
 }
 
 /// Offline commands end quietly when their reader goes away
@@ -132,6 +138,7 @@ pub fn main() -> i32 {
         Command::Replay(a) => replay::run(a),
         Command::Check(c) => check::run(c),
         Command::Identify(a) => identify::run(a),
+        Command::Doctor(a) => doctor::run(a),
     };
     match result {
         Ok(()) => 0,

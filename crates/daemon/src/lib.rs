@@ -16,10 +16,12 @@
 //! - [`channels`]: the topics and schemas the recording and the view share.
 //! - [`viewer`]: the Foxglove view, live and from a recording.
 //! - [`tracker_check`]: what the tracker sends (`topspin check tracker`).
+//! - [`doctor`]: is this PC ready for the 4 ms loop (`topspin doctor`).
 
 pub mod channels;
 pub mod clock;
 pub mod config;
+pub mod doctor;
 pub mod record;
 pub mod rsi_identify;
 pub mod rsi_server;

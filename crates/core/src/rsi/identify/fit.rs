@@ -28,11 +28,11 @@
 
 use nalgebra::DMatrix;
 
-/// The longest lag the fit considers, s.
-pub const MAX_LAG_S: f64 = 0.5;
-/// The longest dead time the fit considers, s (a KR C2 was measured at
-/// ≈ 120 ms command to position, DESIGN §11).
-pub const MAX_DEAD_TIME_S: f64 = 0.12;
+/// The longest lag the fit considers, s: what `[servo] lag_ms` accepts.
+pub const MAX_LAG_S: f64 = crate::calib::robot::MAX_LAG_MS * 1e-3;
+/// The longest dead time the fit considers, s: what `[servo]
+/// dead_time_ms` accepts.
+pub const MAX_DEAD_TIME_S: f64 = crate::calib::robot::MAX_DEAD_TIME_MS * 1e-3;
 /// Grid points over τ before the golden-section search.
 const LAG_GRID: usize = 48;
 /// The shortest non-zero τ on the grid, in cycles.
