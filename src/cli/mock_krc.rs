@@ -55,6 +55,13 @@ pub struct MockKrcArgs {
     pub reorder: f64,
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// The robot's dead time, ms, whole cycles (default 0: the ideal
+    /// robot; calib/robot.toml [servo] has the robot's own, to identify).
+    #[arg(long, default_value_t = 0.0)]
+    pub dead_time_ms: f64,
+    /// The robot's first-order lag behind the command, ms (default 0).
+    #[arg(long, default_value_t = 0.0)]
+    pub lag_ms: f64,
     /// Write the TCP path here (CSV).
     #[arg(long)]
     pub csv: Option<PathBuf>,
@@ -93,6 +100,17 @@ pub fn run(a: MockKrcArgs) -> anyhow::Result<()> {
     if let Some(l) = a.late_limit {
         cfg.controller.late_limit = l.max(1);
     }
+    let cycles = a.dead_time_ms / a.cycle_ms as f64;
+    if !(a.dead_time_ms.is_finite() && (0.0..=100.0).contains(&a.dead_time_ms))
+        || (cycles - cycles.round()).abs() > 1e-9
+    {
+        return Err(BadInput(format!("--dead-time-ms must be whole cycles of {} ms within 0..100", a.cycle_ms)).into());
+    }
+    if !(a.lag_ms.is_finite() && (0.0..=200.0).contains(&a.lag_ms)) {
+        return Err(BadInput("--lag-ms must be within 0..200".into()).into());
+    }
+    cfg.controller.dead_time_cycles = cycles.round() as u32;
+    cfg.controller.lag_s = a.lag_ms * 1e-3;
     cfg.cycles = a.cycles;
     cfg.seed = a.seed;
     cfg.faults = Faults {

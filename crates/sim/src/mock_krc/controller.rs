@@ -7,6 +7,13 @@
 //! translation/rotation: exceeding it stops RSI), then the robot follows
 //! the commanded pose within its own per-axis velocity and acceleration
 //! limits. A late cycle keeps the last correction (HOLDON).
+//!
+//! Optionally (`dead_time_cycles`, `lag_s`; zero by default, the ideal
+//! robot) the commanded pose reaches the robot after a dead time of whole
+//! cycles and the robot follows it through a first-order lag per axis, for
+//! `topspin identify` and `topspin mock-krc --dead-time-ms --lag-ms`: with
+//! no lag, the pose answered for request k is the `RIst` of request
+//! k + 1 + `dead_time_cycles`.
 
 #![allow(clippy::needless_range_loop)] // parallel per-axis arrays
 
@@ -69,6 +76,10 @@ pub struct ControllerConfig {
     pub mon_max_rot_deg: f64,
     /// First IPOC.
     pub first_ipoc: u64,
+    /// Whole cycles between a correction and the robot moving to it.
+    pub dead_time_cycles: u32,
+    /// First-order lag of the robot behind the (delayed) command, s.
+    pub lag_s: f64,
 }
 
 /// One cycle of the logged TCP path.
@@ -96,6 +107,10 @@ pub struct MockController {
     commanded: [f64; 6],
     actual: [f64; 6],
     velocity: [f64; 6],
+    /// The commands of the last `dead_time_cycles` cycles, oldest first,
+    /// and the lagged command the robot follows.
+    delayed: std::collections::VecDeque<[f64; 6]>,
+    lagged: [f64; 6],
     answered: Option<[f64; 6]>,
     pub late: u64,
     pub wrong_ipoc: u64,
@@ -115,6 +130,8 @@ impl MockController {
             commanded: cfg.start,
             actual: cfg.start,
             velocity: [0.0; 6],
+            delayed: std::collections::VecDeque::from(vec![cfg.start; cfg.dead_time_cycles as usize]),
+            lagged: cfg.start,
             answered: None,
             late: 0,
             wrong_ipoc: 0,
@@ -250,12 +267,24 @@ impl MockController {
         }
     }
 
-    /// One cycle of the robot towards the command; true where its limits acted.
+    /// One cycle of the robot towards the command (after the dead time
+    /// and the lag); true where its limits acted.
     fn follow(&mut self) -> bool {
         let dt = self.cfg.cycle_ms as f64 * 1e-3;
+        let target = match self.delayed.pop_front() {
+            Some(old) => {
+                self.delayed.push_back(self.commanded); // one out, one in: no allocation
+                old
+            }
+            None => self.commanded,
+        };
+        let step = if self.cfg.lag_s > 0.0 { 1.0 - (-dt / self.cfg.lag_s).exp() } else { 1.0 };
+        for i in 0..6 {
+            self.lagged[i] += step * (target[i] - self.lagged[i]);
+        }
         let mut limited = false;
         for i in 0..6 {
-            let vd = (self.commanded[i] - self.actual[i]) / dt;
+            let vd = (self.lagged[i] - self.actual[i]) / dt;
             let u = self.cfg.amax[i] * dt;
             let v = vd.clamp(self.velocity[i] - u, self.velocity[i] + u).clamp(-self.cfg.vmax[i], self.cfg.vmax[i]);
             limited |= (v - vd).abs() > 1e-9 * (1.0 + vd.abs());
@@ -266,5 +295,50 @@ impl MockController {
             self.robot_limited += 1;
         }
         limited
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mock_krc::MockKrcConfig;
+
+    /// Holds a 0.05 mm correction on x from the first cycle (within the
+    /// robot's own acceleration limit in one cycle); the actual x after
+    /// each cycle, relative to the start, in units of the correction.
+    fn response(dead_time_cycles: u32, lag_s: f64, cycles: usize) -> Vec<f64> {
+        let mut cfg = MockKrcConfig::default_cell().unwrap().controller;
+        cfg.dead_time_cycles = dead_time_cycles;
+        cfg.lag_s = lag_s;
+        let x0 = cfg.start[0];
+        let mut c = MockController::new(cfg);
+        (0..cycles)
+            .map(|k| {
+                c.answered = Some([0.05, 0.0, 0.0, 0.0, 0.0, 0.0]);
+                ((c.end_cycle(Instant(k as u64 * 4_000_000)).actual[0] - x0) / 0.05 * 1e9).round() / 1e9
+            })
+            .collect()
+    }
+
+    #[test]
+    fn the_ideal_robot_is_there_one_cycle_later() {
+        assert_eq!(response(0, 0.0, 3), vec![1.0, 1.0, 1.0]);
+    }
+
+    #[test]
+    fn dead_time_delays_by_whole_cycles() {
+        let r = response(3, 0.0, 6);
+        assert_eq!(r, vec![0.0, 0.0, 0.0, 1.0, 1.0, 1.0]);
+    }
+
+    #[test]
+    fn the_lag_closes_its_share_of_the_gap_each_cycle() {
+        let r = response(2, 0.015, 6);
+        let step = 1.0 - (-0.004f64 / 0.015).exp();
+        let expect =
+            [0.0, 0.0, step, 1.0 - (1.0 - step).powi(2), 1.0 - (1.0 - step).powi(3), 1.0 - (1.0 - step).powi(4)];
+        for (k, (a, b)) in r.iter().zip(expect).enumerate() {
+            assert!((a - b).abs() < 1e-8, "cycle {k}: {a} vs {b}");
+        }
     }
 }

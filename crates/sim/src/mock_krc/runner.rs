@@ -69,6 +69,8 @@ impl MockKrcConfig {
             mon_max_trans_mm: context.mon_max_trans_mm,
             mon_max_rot_deg: context.mon_max_rot_deg,
             first_ipoc: 4_208_831,
+            dead_time_cycles: 0,
+            lag_s: 0.0,
         };
         MockKrcConfig {
             controller,
