@@ -72,6 +72,51 @@ fn the_ideal_mock_has_no_dead_time_and_no_lag() {
     assert!(r["cycles"].as_u64().unwrap() >= 750, "{r}");
 }
 
+/// The mock with `d` cycles of dead time and a lag of `lag_s`: the JSON's
+/// dead time within one cycle, its lag within 20 %.
+fn recovers(d: u32, lag_s: f64, extra: &[&str]) {
+    let (out, mock) = identify_against_mock(extra, |c| {
+        c.controller.dead_time_cycles = d;
+        c.controller.lag_s = lag_s;
+    });
+    let r = json(&out);
+    eprintln!(
+        "mock d {d} cycles, lag {:.1} ms → d {} ({} ms ± {:.2}, runner-up {} ×{:.2}), lag {:.2} ± {:.3} ms, fit {:.2} %, rms {:.4} mm, late {} gaps {} of {} cycles (mock late {}, robot limited {})",
+        lag_s * 1e3,
+        r["dead_time_cycles"],
+        r["dead_time_ms"],
+        r["dead_time_std_ms"].as_f64().unwrap(),
+        r["dead_time_runner_up_cycles"],
+        r["dead_time_runner_up_ratio"].as_f64().unwrap_or(f64::INFINITY),
+        r["lag_ms"].as_f64().unwrap(),
+        r["lag_std_ms"].as_f64().unwrap(),
+        r["fit_percent"].as_f64().unwrap(),
+        r["rms_mm"].as_f64().unwrap(),
+        r["late"],
+        r["gaps"],
+        r["cycles"],
+        mock.late,
+        mock.robot_limited
+    );
+    let got_d = r["dead_time_cycles"].as_i64().unwrap();
+    assert!((got_d - d as i64).abs() <= 1, "dead time {got_d} cycles, configured {d}: {r}");
+    assert_eq!(r["dead_time_ms"].as_f64().unwrap(), got_d as f64 * 4.0);
+    let lag_ms = r["lag_ms"].as_f64().unwrap();
+    assert!((lag_ms - lag_s * 1e3).abs() <= 0.2 * lag_s * 1e3, "lag {lag_ms} ms, configured {} ms: {r}", lag_s * 1e3);
+    let toml = r["calib_toml"].as_str().unwrap();
+    assert!(toml.starts_with("[servo]\ndead_time_ms = ") && toml.contains("\nlag_ms = "), "{toml}");
+}
+
+#[test]
+fn the_mock_s_3_cycles_and_15_ms_are_recovered() {
+    recovers(3, 0.015, &["--axis", "x", "--seconds", "4"]);
+}
+
+#[test]
+fn the_mock_s_1_cycle_and_30_ms_are_recovered_on_every_axis() {
+    recovers(1, 0.030, &["--axis", "all", "--seconds", "9"]);
+}
+
 #[test]
 fn no_controller_is_a_failure_with_its_reason() {
     let port = free_port();
