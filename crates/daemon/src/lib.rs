@@ -8,6 +8,8 @@
 //! - [`clock`]: the only place that reads the clock.
 //! - [`runtime`]: the daemon's threads, real-time set-up and telemetry.
 //! - [`rsi_server`]: the sensor-side UDP loop around the RSI session.
+//! - [`rsi_identify`]: the UDP loop of `topspin identify` around the
+//!   sans-IO identifier.
 //! - [`config`]: the layered, validated configuration.
 //! - [`systemd`]: readiness and watchdog notifications.
 //! - [`record`]: session recording (MCAP) and bit-exact replay.
@@ -21,6 +23,7 @@ pub mod clock;
 pub mod config;
 pub mod doctor;
 pub mod record;
+pub mod rsi_identify;
 pub mod rsi_server;
 pub mod runtime;
 pub mod systemd;
