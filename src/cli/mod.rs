@@ -5,6 +5,7 @@
 use clap::{Parser, Subcommand};
 
 pub mod bench;
+pub mod calibrate;
 pub mod check;
 pub mod crops;
 pub mod demo;
@@ -68,6 +69,12 @@ pub enum Command {
     /// Commissioning checks: `check tracker` listens on the tracker port.
     #[command(subcommand)]
     Check(check::CheckCommand),
+    /// Calibration from measurements: `calibrate cell` finds the table in
+    /// the robot's BASE from touch points.
+    ///
+    /// Example: `topspin calibrate cell --points touches.csv --write calib`.
+    #[command(subcommand)]
+    Calibrate(calibrate::CalibrateCommand),
     /// Is this PC ready for the 4 ms RSI loop? Kernel, cores, rights, NIC,
     /// swap, time sync and a wake-up jitter probe on the RSI core.
     ///
@@ -107,6 +114,7 @@ pub fn main() -> i32 {
         Command::Replay(a) => replay::run(a),
         Command::Check(c) => check::run(c),
         Command::Doctor(a) => doctor::run(a),
+        Command::Calibrate(c) => calibrate::run(c),
     };
     match result {
         Ok(()) => 0,

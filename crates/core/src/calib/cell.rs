@@ -32,12 +32,14 @@
 //!   between the centroids.
 //!
 //! [`CellFit::check`] holds the fit to [`Bounds`] and refuses
-//! ([`Refusal`]) touches that no rigid transform explains (the full fit's
-//! RMS or worst residual over the bound: a point touched wrongly, named),
-//! a base tilted beyond `max_tilt_deg` (the yaw-only `[cell]` cannot hold
-//! it: every point 1 m from the base would be off by 17 mm per degree; the
-//! fix is to level the pedestal, not to hide it in a residual), and a
-//! yaw-only fit over the bounds.
+//! ([`Refusal`]) a base tilted beyond `max_tilt_deg` where the full fit
+//! explains the touches (the yaw-only `[cell]` cannot hold a tilt: a point
+//! 1 m from the base is off by 17 mm per degree; the fix is to level the
+//! pedestal, not to hide it in a residual; refused rather than warned
+//! about, since every plan would carry that error), and an RMS or worst
+//! residual over the bound, naming the worst point of the level fit (a
+//! point touched too high would be half hidden in a tilt by the full fit,
+//! which then blames another).
 //!
 //! [`average_still`] turns a few cycles of `RIst` into one touch, refusing
 //! a robot that moved meanwhile; [`replace_cell_lines`] edits the two
@@ -178,25 +180,8 @@ impl Default for Bounds {
 /// A fit outside its [`Bounds`].
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 pub enum Refusal {
-    /// No rigid transform explains the touches: RMS or worst residual of
-    /// the full fit over the bound.
-    #[error(
-        "the touches do not fit the table: {which} residual {:.2} mm > {:.2} mm, worst point {worst} ({:.2} mm): touch it again",
-        value_m * 1e3, bound_m * 1e3, worst_m * 1e3
-    )]
-    Inconsistent {
-        /// `RMS` or `worst`.
-        which: &'static str,
-        /// The residual over the bound, m.
-        value_m: f64,
-        /// The bound, m.
-        bound_m: f64,
-        /// The point with the largest residual.
-        worst: String,
-        /// Its residual, m.
-        worst_m: f64,
-    },
-    /// The base is not level: the yaw-only `[cell]` cannot hold it.
+    /// The touches fit the table only with the base tilted: the yaw-only
+    /// `[cell]` cannot hold it.
     #[error(
         "the base is tilted {tilt_deg:.2}° (roll {roll_deg:.2}°, pitch {pitch_deg:.2}°) > {bound_deg:.2}°: level the robot's pedestal (calib/robot.toml [cell] holds a yaw only)"
     )]
@@ -210,14 +195,16 @@ pub enum Refusal {
         /// The bound, degrees.
         bound_deg: f64,
     },
-    /// The level (yaw-only) fit is over the residual bounds.
+    /// RMS or worst residual over the bound: a point touched wrongly.
     #[error(
-        "the level fit's {which} residual {:.2} mm > {:.2} mm, worst point {worst} ({:.2} mm)",
+        "the touches do not fit the table: {which} residual {:.2} mm > {:.2} mm ({fit} fit), worst point {worst} ({:.2} mm): touch it again",
         value_m * 1e3, bound_m * 1e3, worst_m * 1e3
     )]
-    LevelResidual {
+    Residual {
         /// `RMS` or `worst`.
         which: &'static str,
+        /// `level` (the written model) or `full`.
+        fit: &'static str,
         /// The residual over the bound, m.
         value_m: f64,
         /// The bound, m.
@@ -441,36 +428,42 @@ pub fn fit_cell(touches: &[Touch], contact_offset_m: f64, yaw_near_deg: f64) -> 
 }
 
 impl CellFit {
-    /// Holds the fit to `bounds`: the full fit's residuals first (touches
-    /// no rigid transform explains), then the tilt, then the level fit's
-    /// residuals.
+    /// Holds the fit to `bounds`. A full fit within the residual bounds
+    /// but tilted beyond `max_tilt_deg` is a base that is not level;
+    /// otherwise the level fit's residuals decide and name the worst
+    /// point (the level fit cannot absorb a point touched too high or low
+    /// into a tilt, as the full fit partly does, so it names the right
+    /// one); then the tilt and the full fit's worst residual.
     pub fn check(&self, bounds: &Bounds) -> Result<(), Refusal> {
         let f = &self.full;
-        for (which, value_m, bound_m) in [("RMS", f.rms_m, bounds.max_rms_m), ("worst", f.worst_m, bounds.max_worst_m)] {
-            if value_m > bound_m {
-                return Err(Refusal::Inconsistent { which, value_m, bound_m, worst: f.worst.clone(), worst_m: f.worst_m });
+        let not_level = || Refusal::NotLevel {
+            tilt_deg: f.tilt_deg,
+            roll_deg: f.roll_deg,
+            pitch_deg: f.pitch_deg,
+            bound_deg: bounds.max_tilt_deg,
+        };
+        let full_ok = f.rms_m <= bounds.max_rms_m && f.worst_m <= bounds.max_worst_m;
+        if full_ok && f.tilt_deg > bounds.max_tilt_deg {
+            return Err(not_level());
+        }
+        let level = [("RMS", self.rms_m, bounds.max_rms_m), ("worst", self.worst_m, bounds.max_worst_m)];
+        for (which, value_m, bound_m) in level {
+            if !(value_m <= bound_m) {
+                let worst = self.worst.clone();
+                return Err(Refusal::Residual { which, fit: "level", value_m, bound_m, worst, worst_m: self.worst_m });
             }
         }
         if f.tilt_deg > bounds.max_tilt_deg {
-            return Err(Refusal::NotLevel {
-                tilt_deg: f.tilt_deg,
-                roll_deg: f.roll_deg,
-                pitch_deg: f.pitch_deg,
-                bound_deg: bounds.max_tilt_deg,
-            });
+            return Err(not_level());
         }
-        for (which, value_m, bound_m) in
-            [("RMS", self.rms_m, bounds.max_rms_m), ("worst", self.worst_m, bounds.max_worst_m)]
-        {
-            if value_m > bound_m {
-                return Err(Refusal::LevelResidual {
-                    which,
-                    value_m,
-                    bound_m,
-                    worst: self.worst.clone(),
-                    worst_m: self.worst_m,
-                });
-            }
+        if !full_ok {
+            let (which, value_m, bound_m) = if f.rms_m > bounds.max_rms_m {
+                ("RMS", f.rms_m, bounds.max_rms_m)
+            } else {
+                ("worst", f.worst_m, bounds.max_worst_m)
+            };
+            let worst = f.worst.clone();
+            return Err(Refusal::Residual { which, fit: "full", value_m, bound_m, worst, worst_m: f.worst_m });
         }
         Ok(())
     }
@@ -727,7 +720,9 @@ mod tests {
         let loose = Bounds { max_tilt_deg: 1.0, ..Bounds::default() };
         assert!(f.worst_m > DEFAULT_MAX_WORST_M, "{}", f.worst_m);
         match f.check(&loose) {
-            Err(Refusal::LevelResidual { which, worst, .. }) => assert_eq!((which, worst.as_str()), ("RMS", "corner_robot_pos_y")),
+            Err(Refusal::Residual { which, fit, worst, .. }) => {
+                assert_eq!((which, fit, worst.as_str()), ("RMS", "level", "corner_robot_pos_y"))
+            }
             other => panic!("{other:?}"),
         }
         // A small tilt is within the bounds and the level fit holds.
@@ -776,14 +771,26 @@ mod tests {
         assert_eq!(f.full.worst, "corner_robot_neg_y");
         assert_eq!(f.worst, "corner_robot_neg_y");
         match f.check(&Bounds::default()) {
-            Err(Refusal::Inconsistent { worst, which, .. }) => {
-                assert_eq!((worst.as_str(), which), ("corner_robot_neg_y", "RMS"))
+            Err(Refusal::Residual { worst, which, fit, .. }) => {
+                assert_eq!((worst.as_str(), which, fit), ("corner_robot_neg_y", "RMS", "level"))
             }
             other => panic!("{other:?}"),
         }
         // Loosen the RMS only: the worst bound names it.
         let b = Bounds { max_rms_m: 0.05, ..Bounds::default() };
-        assert!(matches!(f.check(&b), Err(Refusal::Inconsistent { which: "worst", .. })));
+        assert!(matches!(f.check(&b), Err(Refusal::Residual { which: "worst", .. })));
+        // Touched 15 mm too high: the full fit tilts towards it and blames
+        // another point; the level fit names it.
+        let mut t = touches(&reachable(), rot(0.0, 0.0, 180.0), [2.05, 0.0, -0.05], 0.0);
+        t[1].tcp_b_m[2] += 0.015;
+        let f = fit_cell(&t, 0.0, 180.0).unwrap();
+        assert_ne!(f.full.worst, "corner_robot_neg_y");
+        match f.check(&Bounds::default()) {
+            Err(Refusal::Residual { worst, fit, .. }) => {
+                assert_eq!((worst.as_str(), fit), ("corner_robot_neg_y", "level"))
+            }
+            other => panic!("{other:?}"),
+        }
         let b = Bounds { max_rms_m: 0.05, max_worst_m: 0.05, max_tilt_deg: 10.0 };
         assert_eq!(f.check(&b), Ok(()));
     }
@@ -855,7 +862,10 @@ mod tests {
         let (a, b): (Vec<_>, Vec<_>) = (ROBOT_TOML.lines().collect(), out.lines().collect());
         assert_eq!(a.len(), b.len());
         let changed: Vec<_> = a.iter().zip(&b).filter(|(x, y)| x != y).map(|(_, y)| *y).collect();
-        assert_eq!(changed, ["base_in_table_xyz_m = [2.09312, -0.03710, -0.08100]", "base_yaw_in_table_deg = 183.5000"]);
+        assert_eq!(
+            changed,
+            ["base_in_table_xyz_m = [2.09312, -0.03710, -0.08100]", "base_yaw_in_table_deg = 183.5000"]
+        );
         // Trailing comments, a multi-line array and no final newline.
         let text = "version = 1\n[home]\nbase_yaw_in_table_deg = 1.0\n[cell]\n  base_in_table_xyz_m = [\n 1.0,\n 2.0, 3.0] # where\nbase_yaw_in_table_deg = 90.0   # turned";
         let out = replace_cell_lines(text, &cell).unwrap();

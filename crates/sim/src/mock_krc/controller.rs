@@ -172,6 +172,14 @@ impl MockController {
         .emit(&self.cfg.send, self.cfg.precision, buf)
     }
 
+    /// Moves the robot by something other than RSI (its program or the
+    /// jog keys, as for touching a point while RSI answers zero): the pose
+    /// RSI corrects from becomes `start` (mm, degrees), and the robot goes
+    /// there within its own velocity and acceleration limits.
+    pub fn move_start(&mut self, start: [f64; 6]) {
+        self.cfg.start = start;
+    }
+
     /// Offers an answer received before this cycle's deadline.
     pub fn answer(&mut self, bytes: &[u8]) -> Verdict {
         let sen = match SenFrame::parse(bytes) {
@@ -318,6 +326,18 @@ mod tests {
                 ((c.end_cycle(Instant(k as u64 * 4_000_000)).actual[0] - x0) / 0.05 * 1e9).round() / 1e9
             })
             .collect()
+    }
+
+    #[test]
+    fn a_moved_start_is_followed_with_no_correction() {
+        let cfg = MockKrcConfig::default_cell().unwrap().controller;
+        let mut to = cfg.start;
+        to[0] += 0.05;
+        let mut c = MockController::new(cfg);
+        c.move_start(to);
+        c.answered = Some([0.0; 6]);
+        let got = c.end_cycle(Instant(4_000_000)).actual;
+        assert!(got.iter().zip(&to).all(|(a, b)| (a - b).abs() < 1e-9), "{got:?} {to:?}");
     }
 
     #[test]
