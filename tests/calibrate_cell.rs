@@ -154,13 +154,16 @@ fn rsi_touches_of_the_mock_robot_recover_its_true_base() {
     assert!(j["rms_mm"].as_f64().unwrap() < 0.01, "{j}");
 }
 
+/// A touch: name, TCP in B (mm), the point's own table coordinates.
+type TouchRow = (String, [f64; 3], Option<[f64; 3]>);
+
 fn copy_calib(dir: &Path) {
     for f in ["physics.toml", "table.toml", "strike.toml", "robot.toml", "camera.toml"] {
         std::fs::copy(Path::new(env!("CARGO_MANIFEST_DIR")).join("calib").join(f), dir.join(f)).unwrap();
     }
 }
 
-fn csv_text(tcps: &[(String, [f64; 3], Option<[f64; 3]>)]) -> String {
+fn csv_text(tcps: &[TouchRow]) -> String {
     let mut s = "name,x_mm,y_mm,z_mm,table_x_m,table_y_m,table_z_m\n".to_owned();
     for (n, b, own) in tcps {
         let own = own.map_or(",,".to_owned(), |p| format!("{},{},{}", p[0], p[1], p[2]));
@@ -169,7 +172,7 @@ fn csv_text(tcps: &[(String, [f64; 3], Option<[f64; 3]>)]) -> String {
     s
 }
 
-fn touches() -> Vec<(String, [f64; 3], Option<[f64; 3]>)> {
+fn touches() -> Vec<TouchRow> {
     POINTS.iter().map(|(n, own)| (n.to_string(), tcp_in_b_mm(table_point(n, *own)), *own)).collect()
 }
 

@@ -448,7 +448,7 @@ impl CellFit {
         }
         let level = [("RMS", self.rms_m, bounds.max_rms_m), ("worst", self.worst_m, bounds.max_worst_m)];
         for (which, value_m, bound_m) in level {
-            if !(value_m <= bound_m) {
+            if value_m > bound_m || value_m.is_nan() {
                 let worst = self.worst.clone();
                 return Err(Refusal::Residual { which, fit: "level", value_m, bound_m, worst, worst_m: self.worst_m });
             }
@@ -571,7 +571,7 @@ pub fn replace_cell_lines(text: &str, cell: &CellPlacement) -> Result<String, Ed
                     out.push_str(&format!("{indent}{} = {}{}", KEYS[k], new_values[k], &value_line[close..]));
                 } else {
                     let after = &line[value_start..];
-                    let tail_at = after.find('#').map_or_else(|| after.trim_end().len(), |i| i);
+                    let tail_at = after.find('#').unwrap_or_else(|| after.trim_end().len());
                     let tail = &after[tail_at..];
                     let sep = if tail.starts_with('#') { " " } else { "" };
                     let newline = if tail.ends_with('\n') || !line.ends_with('\n') { "" } else { "\n" };
@@ -627,6 +627,7 @@ pub fn resolve_point(table: &Table, name: &str, own: Option<[f64; 3]>) -> Result
 }
 
 #[cfg(test)]
+#[allow(clippy::needless_range_loop)] // parallel x, y, z arrays
 mod tests {
     use super::*;
 
