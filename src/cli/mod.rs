@@ -5,6 +5,7 @@
 use clap::{Parser, Subcommand};
 
 pub mod bench;
+pub mod calibrate;
 pub mod check;
 pub mod crops;
 pub mod demo;
@@ -76,6 +77,12 @@ pub enum Command {
     /// Example: `topspin identify --axis all --amplitude-mm 3` (T1, reduced
     /// override; see rsi/README.md), then select and start topspin_rsi.src.
     Identify(identify::IdentifyArgs),
+    /// Calibration from measurements: `calibrate cell` finds the table in
+    /// the robot's BASE from touch points.
+    ///
+    /// Example: `topspin calibrate cell --points touches.csv --write calib`.
+    #[command(subcommand)]
+    Calibrate(calibrate::CalibrateCommand),
     /// Is this PC ready for the 4 ms RSI loop? Kernel, cores, rights, NIC,
     /// swap, time sync and a wake-up jitter probe on the RSI core.
     ///
@@ -139,6 +146,7 @@ pub fn main() -> i32 {
         Command::Check(c) => check::run(c),
         Command::Identify(a) => identify::run(a),
         Command::Doctor(a) => doctor::run(a),
+        Command::Calibrate(c) => calibrate::run(c),
     };
     match result {
         Ok(()) => 0,

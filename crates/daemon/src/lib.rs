@@ -17,6 +17,7 @@
 //! - [`viewer`]: the Foxglove view, live and from a recording.
 //! - [`tracker_check`]: what the tracker sends (`topspin check tracker`).
 //! - [`doctor`]: is this PC ready for the 4 ms loop (`topspin doctor`).
+//! - [`touch`]: the RSI listener that reads touch points (`topspin calibrate cell --rsi`).
 
 pub mod channels;
 pub mod clock;
@@ -27,5 +28,6 @@ pub mod rsi_identify;
 pub mod rsi_server;
 pub mod runtime;
 pub mod systemd;
+pub mod touch;
 pub mod tracker_check;
 pub mod viewer;

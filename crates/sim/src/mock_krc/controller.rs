@@ -261,6 +261,14 @@ impl MockController {
         .emit(&self.cfg.send, self.cfg.precision, buf)
     }
 
+    /// Moves the robot by something other than RSI (its program or the
+    /// jog keys, as for touching a point while RSI answers zero): the pose
+    /// RSI corrects from becomes `start` (mm, degrees), and the axes go
+    /// there through the dead time and the lag.
+    pub fn move_start(&mut self, start: [f64; 6]) {
+        self.cfg.start = start;
+    }
+
     /// Offers an answer received before this cycle's deadline.
     pub fn answer(&mut self, bytes: &[u8]) -> Verdict {
         let sen = match SenFrame::parse(bytes) {
@@ -425,5 +433,96 @@ impl MockController {
         for i in 3..6 {
             self.actual[i] = unwrap_near(p[i], self.actual[i].to_radians()).to_degrees();
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mock_krc::MockKrcConfig;
+
+    /// Holds a 0.05 mm correction on x from the first cycle; the actual x
+    /// after each cycle, relative to the start, in units of the correction.
+    fn response(dead_time_cycles: u32, lag_s: f64, cycles: usize) -> Vec<f64> {
+        let mut cfg = MockKrcConfig::default_cell().unwrap().controller;
+        cfg.dead_time_cycles = dead_time_cycles;
+        cfg.lag_s = lag_s;
+        let x0 = cfg.start[0];
+        let mut c = MockController::new(cfg);
+        (0..cycles)
+            .map(|k| {
+                c.answered = Some([0.05, 0.0, 0.0, 0.0, 0.0, 0.0]);
+                ((c.end_cycle(Instant(k as u64 * 4_000_000)).actual[0] - x0) / 0.05 * 1e6).round() / 1e6
+            })
+            .collect()
+    }
+
+    #[test]
+    fn the_ideal_robot_is_there_one_cycle_later() {
+        assert_eq!(response(0, 0.0, 3), vec![1.0, 1.0, 1.0]);
+    }
+
+    #[test]
+    fn dead_time_delays_by_whole_cycles() {
+        assert_eq!(response(3, 0.0, 6), vec![0.0, 0.0, 0.0, 1.0, 1.0, 1.0]);
+    }
+
+    #[test]
+    fn the_axes_close_their_share_of_the_gap_each_cycle() {
+        // Per axis in joint space; over 0.05 mm the forward kinematics is
+        // linear to 1e-6 of the step.
+        let r = response(2, 0.015, 6);
+        let step = 1.0 - (-0.004f64 / 0.015).exp();
+        let expect = [0.0, 0.0, step, 1.0 - (1.0 - step).powi(2), 1.0 - (1.0 - step).powi(3), 1.0 - (1.0 - step).powi(4)];
+        for (k, (a, b)) in r.iter().zip(expect).enumerate() {
+            assert!((a - b).abs() < 1e-5, "cycle {k}: {a} vs {b}");
+        }
+    }
+
+    #[test]
+    fn a_moved_start_is_followed_with_no_correction() {
+        let mut cfg = MockKrcConfig::default_cell().unwrap().controller;
+        cfg.dead_time_cycles = 0;
+        cfg.lag_s = 0.0;
+        let mut to = cfg.start;
+        to[0] += 0.05;
+        let mut c = MockController::new(cfg);
+        c.move_start(to);
+        c.answered = Some([0.0; 6]);
+        let got = c.end_cycle(Instant(4_000_000)).actual;
+        assert!(got.iter().zip(&to).all(|(a, b)| (a - b).abs() < 1e-9), "{got:?} {to:?}");
+    }
+
+    #[test]
+    fn it_stops_naming_the_axis_limit_it_broke() {
+        let cfg = MockKrcConfig::default_cell().unwrap().controller;
+        // Out of reach: 2 m in front of the robot.
+        let mut c = MockController::new(cfg.clone());
+        c.answered = Some([2000.0, 0.0, 0.0, 0.0, 0.0, 0.0]);
+        let mut far = cfg.clone();
+        far.lower_mm = [-5000.0; 3];
+        far.upper_mm = [5000.0; 3];
+        far.mon_max_trans_mm = 1e6;
+        let mut c2 = MockController::new(far.clone());
+        c2.answered = Some([2000.0, 0.0, 0.0, 0.0, 0.0, 0.0]);
+        c2.end_cycle(Instant(4_000_000));
+        assert_eq!(c2.stopped, Some(StopReason::OutOfReach));
+        // A jump of 10 cm in one cycle: the axes over their speed.
+        let mut rates = far.clone();
+        rates.stop_on_axis_rates = true;
+        rates.lag_s = 0.0;
+        rates.dead_time_cycles = 0;
+        let mut c3 = MockController::new(rates);
+        c3.answered = Some([0.0, 100.0, 0.0, 0.0, 0.0, 0.0]);
+        c3.end_cycle(Instant(4_000_000));
+        let Some(StopReason::Axis(v)) = c3.stopped else { panic!("{:?}", c3.stopped) };
+        assert_eq!(v.kind, LimitKind::Speed);
+        assert!(StopReason::Axis(v).key().starts_with("speed_a"));
+        // Counted, not stopped, with the rate stop off.
+        let mut c4 = MockController::new(far);
+        c4.answered = Some([0.0, 100.0, 0.0, 0.0, 0.0, 0.0]);
+        c4.end_cycle(Instant(4_000_000));
+        assert_eq!((c4.stopped, c4.rates_over), (None, 1));
+        drop(c);
     }
 }

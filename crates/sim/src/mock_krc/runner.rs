@@ -6,8 +6,8 @@
 use std::io;
 use std::net::SocketAddr;
 use std::path::Path;
-use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 
 use super::config::{ContextConfig, EthernetConfig, RsiFileError};
@@ -170,7 +170,16 @@ impl MockResult {
 pub struct MockHandle {
     pub stop: Arc<AtomicBool>,
     pub local_addr: SocketAddr,
+    jog: Arc<JogPort>,
     join: JoinHandle<io::Result<MockResult>>,
+}
+
+/// Between a running mock and its owner: a move asked for (taken at the
+/// next cycle's start) and the actual pose after the last cycle.
+#[derive(Debug, Default)]
+struct JogPort {
+    to: Mutex<Option<[f64; 6]>>,
+    actual: Mutex<Option<[f64; 6]>>,
 }
 
 impl MockHandle {
@@ -178,6 +187,17 @@ impl MockHandle {
     pub fn stop(self) -> io::Result<MockResult> {
         self.stop.store(true, Ordering::Relaxed);
         self.join()
+    }
+
+    /// Moves the robot to `pose` (mm, degrees) as its program or the jog
+    /// keys would, RSI still running ([`MockController::move_start`]).
+    pub fn move_to(&self, pose: [f64; 6]) {
+        *self.jog.to.lock().unwrap_or_else(|e| e.into_inner()) = Some(pose);
+    }
+
+    /// The actual pose (`RIst`) after the last cycle, `None` before the first.
+    pub fn actual(&self) -> Option<[f64; 6]> {
+        *self.jog.actual.lock().unwrap_or_else(|e| e.into_inner())
     }
 
     /// Waits for the mock to finish by itself (cycle count, stop by limit).
@@ -192,19 +212,21 @@ pub fn spawn(cfg: MockKrcConfig) -> io::Result<MockHandle> {
     let local_addr = link.local_addr()?;
     let stop = Arc::new(AtomicBool::new(false));
     let s = stop.clone();
-    let join = std::thread::Builder::new().name("mock-krc".into()).spawn(move || run_on(link, &cfg, &s))?;
-    Ok(MockHandle { stop, local_addr, join })
+    let jog = Arc::new(JogPort::default());
+    let j = jog.clone();
+    let join = std::thread::Builder::new().name("mock-krc".into()).spawn(move || run_on(link, &cfg, &s, Some(&j)))?;
+    Ok(MockHandle { stop, local_addr, jog, join })
 }
 
 /// Runs the mock on this thread until `stop`, the cycle count or RSI stops.
 pub fn run(cfg: &MockKrcConfig, stop: &AtomicBool) -> io::Result<MockResult> {
-    run_on(UdpLink::new(cfg.bind, cfg.sensor)?, cfg, stop)
+    run_on(UdpLink::new(cfg.bind, cfg.sensor)?, cfg, stop, None)
 }
 
-fn run_on(link: UdpLink, cfg: &MockKrcConfig, stop: &AtomicBool) -> io::Result<MockResult> {
+fn run_on(link: UdpLink, cfg: &MockKrcConfig, stop: &AtomicBool, jog: Option<&JogPort>) -> io::Result<MockResult> {
     if cfg.faults.any() {
         let mut f = FaultInjector::new(link, cfg.faults, cfg.seed);
-        let mut r = cycle_loop(&mut f, cfg, stop)?;
+        let mut r = cycle_loop(&mut f, cfg, stop, jog)?;
         r.dropped = f.dropped;
         r.delayed = f.delayed;
         r.duplicated = f.duplicated;
@@ -212,11 +234,16 @@ fn run_on(link: UdpLink, cfg: &MockKrcConfig, stop: &AtomicBool) -> io::Result<M
         Ok(r)
     } else {
         let mut l = link;
-        cycle_loop(&mut l, cfg, stop)
+        cycle_loop(&mut l, cfg, stop, jog)
     }
 }
 
-fn cycle_loop<L: Link>(link: &mut L, cfg: &MockKrcConfig, stop: &AtomicBool) -> io::Result<MockResult> {
+fn cycle_loop<L: Link>(
+    link: &mut L,
+    cfg: &MockKrcConfig,
+    stop: &AtomicBool,
+    jog: Option<&JogPort>,
+) -> io::Result<MockResult> {
     let mut ctrl = MockController::new(cfg.controller.clone());
     let cycle = Duration::from_millis(cfg.controller.cycle_ms as u64);
     let deadline_after = if cfg.answer_deadline >= cycle {
@@ -235,6 +262,9 @@ fn cycle_loop<L: Link>(link: &mut L, cfg: &MockKrcConfig, stop: &AtomicBool) -> 
     while !stop.load(Ordering::Relaxed) && cfg.cycles.is_none_or(|n| k < n) && ctrl.stopped.is_none() {
         let t_k = Instant(t0.0 + k * cycle.0);
         clock::sleep_until(t_k, SPIN_BEFORE_DEADLINE);
+        if let Some(to) = jog.and_then(|j| j.to.lock().unwrap_or_else(|e| e.into_inner()).take()) {
+            ctrl.move_start(to);
+        }
         let n = ctrl.request(&mut tx).map_err(|e| io::Error::other(e.to_string()))?;
         link.send(&tx[..n])?;
         let deadline = t_k + deadline_after;
@@ -249,6 +279,9 @@ fn cycle_loop<L: Link>(link: &mut L, cfg: &MockKrcConfig, stop: &AtomicBool) -> 
             }
         }
         let sample = ctrl.end_cycle(t_k + cycle);
+        if let Some(j) = jog {
+            *j.actual.lock().unwrap_or_else(|e| e.into_inner()) = Some(sample.actual);
+        }
         out.path.push(sample);
         k += 1;
     }
