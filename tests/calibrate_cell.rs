@@ -30,14 +30,15 @@ const TRUE_YAW_DEG: f64 = 182.5;
 /// The bat's centre 6 mm above each point (half its thickness).
 const OFFSET_M: f64 = 0.006;
 
-/// Table corners and centre line end at the robot's end, two marks of our
-/// own 30 cm into the table.
+/// Points the KR 6 R900 reaches with the bat down (it reaches ~0.9 m
+/// from its A1 axis: the table's corners are beyond it): the centre line's
+/// end at the robot's end and four marks of our own near that edge.
 const POINTS: [(&str, Option<[f64; 3]>); 5] = [
-    ("corner_robot_pos_y", None),
-    ("corner_robot_neg_y", None),
     ("centre_robot_end", None),
-    ("mark_centre", Some([1.07, 0.0, 0.0])),
-    ("mark_pos_y", Some([1.07, 0.5, 0.0])),
+    ("mark_edge_pos_y", Some([1.37, 0.35, 0.0])),
+    ("mark_edge_neg_y", Some([1.37, -0.35, 0.0])),
+    ("mark_in_pos_y", Some([1.28, 0.2, 0.0])),
+    ("mark_in_neg_y", Some([1.28, -0.25, 0.0])),
 ];
 
 fn topspin() -> Command {
@@ -241,10 +242,10 @@ fn a_wrong_touch_is_refused_with_exit_1_and_nothing_written() {
     assert_eq!(out.status.code(), Some(1));
     let j: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(j["ok"], false);
-    assert!(j["refusal"].as_str().unwrap().contains("corner_robot_neg_y"), "{j}");
+    assert!(j["refusal"].as_str().unwrap().contains("mark_edge_pos_y"), "{j}");
     let err = String::from_utf8(out.stderr).unwrap();
     assert_eq!(err.lines().count(), 1, "{err}");
-    assert!(err.starts_with("topspin: refused: ") && err.contains("corner_robot_neg_y"), "{err}");
+    assert!(err.starts_with("topspin: refused: ") && err.contains("mark_edge_pos_y"), "{err}");
     assert_eq!(std::fs::read_to_string(dir.path().join("robot.toml")).unwrap(), before);
     // A looser bound accepts it.
     let out = topspin()
@@ -280,7 +281,7 @@ fn unusable_input_exits_2_with_one_line() {
         (vec!["--points".into(), "/nonexistent/touches.csv".into()], "/nonexistent/touches.csv"),
         (vec![], "--points FILE or --rsi"),
         (vec!["--points".into(), three], "3 points: at least 4"),
-        (vec!["--points".into(), twice], "corner_robot_pos_y is given twice"),
+        (vec!["--points".into(), twice], "centre_robot_end is given twice"),
         (vec!["--points".into(), line], "lie on one line"),
         (vec!["--points".into(), p("bad.csv", "name,x,y\na,1,2\n")], "name,x_mm,y_mm,z_mm"),
         (vec!["--points".into(), p("nan.csv", "name,x_mm,y_mm,z_mm\ncentre_robot_end,1,two,3\n")], "line 2"),

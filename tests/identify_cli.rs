@@ -96,7 +96,7 @@ fn recovers(d: u32, lag_s: f64, extra: &[&str]) {
         r["gaps"],
         r["cycles"],
         mock.late,
-        mock.robot_limited
+        mock.rates_over
     );
     let got_d = r["dead_time_cycles"].as_i64().unwrap();
     assert!((got_d - d as i64).abs() <= 1, "dead time {got_d} cycles, configured {d}: {r}");

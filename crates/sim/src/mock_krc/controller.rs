@@ -473,7 +473,8 @@ mod tests {
         // linear to 1e-6 of the step.
         let r = response(2, 0.015, 6);
         let step = 1.0 - (-0.004f64 / 0.015).exp();
-        let expect = [0.0, 0.0, step, 1.0 - (1.0 - step).powi(2), 1.0 - (1.0 - step).powi(3), 1.0 - (1.0 - step).powi(4)];
+        let expect =
+            [0.0, 0.0, step, 1.0 - (1.0 - step).powi(2), 1.0 - (1.0 - step).powi(3), 1.0 - (1.0 - step).powi(4)];
         for (k, (a, b)) in r.iter().zip(expect).enumerate() {
             assert!((a - b).abs() < 1e-5, "cycle {k}: {a} vs {b}");
         }
