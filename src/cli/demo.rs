@@ -246,12 +246,13 @@ pub fn table(r: &DemoReport) -> String {
     let _ = writeln!(
         out,
         "robot: dead time {:.0} ms, lag {:.0} ms, compensation {}; axes peaked at {:.0} % of their speed, {:.0} % of \
-         their acceleration; {} POSCORR clamps; stopped: {}",
+         their acceleration ({} cycles over a limit); {} POSCORR clamps; stopped: {}",
         rb.dead_time_ms,
         rb.lag_ms,
         if rb.compensation { "on" } else { "off" },
         rb.peak_speed_share * 100.0,
         rb.peak_acceleration_share * 100.0,
+        rb.rates_over,
         r.poscorr_clamped,
         rb.stop_reason.as_deref().unwrap_or("no"),
     );

@@ -170,9 +170,12 @@ pub struct RobotReport {
     pub stop_reason: Option<String>,
     /// Balls whose stroke the planner refused, by reason.
     pub skipped: std::collections::BTreeMap<String, u64>,
-    /// The fastest and hardest any axis moved, as shares of its limits.
+    /// The fastest and hardest any axis moved, as shares of its limits,
+    /// and the cycles with an axis over either (the mock counts them; a
+    /// KR C4 would stop).
     pub peak_speed_share: f64,
     pub peak_acceleration_share: f64,
+    pub rates_over: u64,
 }
 
 /// The ball's true hitting point lies in the hitting window.
@@ -411,6 +414,7 @@ fn judge(
             skipped: summary.telemetry.skipped.clone(),
             peak_speed_share: mock.peak_speed_share,
             peak_acceleration_share: mock.peak_acceleration_share,
+            rates_over: mock.rates_over,
         },
         per_ball,
     }
