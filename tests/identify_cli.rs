@@ -56,7 +56,10 @@ fn json(out: &Output) -> serde_json::Value {
 
 #[test]
 fn the_ideal_mock_has_no_dead_time_and_no_lag() {
-    let (out, mock) = identify_against_mock(&["--axis", "z", "--seconds", "3"], |_| {});
+    let (out, mock) = identify_against_mock(&["--axis", "z", "--seconds", "3"], |c| {
+        c.controller.dead_time_cycles = 0;
+        c.controller.lag_s = 0.0;
+    });
     let r = json(&out);
     eprintln!(
         "ideal mock: dead time {} ms, lag {} ± {} ms, fit {} %, late {} (mock late {}), {} cycles",
@@ -81,7 +84,7 @@ fn recovers(d: u32, lag_s: f64, extra: &[&str]) {
     });
     let r = json(&out);
     eprintln!(
-        "mock d {d} cycles, lag {:.1} ms → d {} ({} ms ± {:.2}, runner-up {} ×{:.2}), lag {:.2} ± {:.3} ms, fit {:.2} %, rms {:.4} mm, late {} gaps {} of {} cycles (mock late {}, robot limited {})",
+        "mock d {d} cycles, lag {:.1} ms → d {} ({} ms ± {:.2}, runner-up {} ×{:.2}), lag {:.2} ± {:.3} ms, fit {:.2} %, rms {:.4} mm, late {} gaps {} of {} cycles (mock late {}, axis rates over {})",
         lag_s * 1e3,
         r["dead_time_cycles"],
         r["dead_time_ms"],

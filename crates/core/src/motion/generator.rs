@@ -596,9 +596,7 @@ impl StrokeGenerator {
     /// `p` from `q` (forward kinematics; angles unwrapped near the last).
     fn update_pose(&mut self) {
         let tcp = self.lim.arm.tcp(&Joints(self.q)).to_pose6();
-        for i in 0..3 {
-            self.p[i] = tcp[i];
-        }
+        self.p[..3].copy_from_slice(&tcp[..3]);
         for i in 3..6 {
             self.p[i] = unwrap_near(tcp[i], self.p[i]);
         }

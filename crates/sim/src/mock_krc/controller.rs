@@ -520,6 +520,8 @@ mod tests {
         assert_eq!(v.kind, LimitKind::Speed);
         assert!(StopReason::Axis(v).key().starts_with("speed_a"));
         // Counted, not stopped, with the rate stop off.
+        far.lag_s = 0.0;
+        far.dead_time_cycles = 0;
         let mut c4 = MockController::new(far);
         c4.answered = Some([0.0, 100.0, 0.0, 0.0, 0.0, 0.0]);
         c4.end_cycle(Instant(4_000_000));
