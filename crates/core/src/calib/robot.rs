@@ -80,6 +80,12 @@ impl ServoModel {
     }
 }
 
+/// The share of its gap a first-order lag of time constant `lag_s` closes
+/// in a cycle of `dt` s, α = 1 − e^(−dt/τ) (1 without a lag).
+pub fn lag_step(dt: f64, lag_s: f64) -> f64 {
+    if lag_s > 0.0 { 1.0 - (-dt / lag_s).exp() } else { 1.0 }
+}
+
 /// The arm and its bat.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]

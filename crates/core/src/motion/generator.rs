@@ -364,11 +364,7 @@ impl StrokeGenerator {
         arm.limits.check_position(&q).map_err(PlanRejected::Joint)?;
         self.inside_margin(&q).map_err(PlanRejected::Joint)?;
         self.clear_of_singularities(&q).map_err(PlanRejected::Joint)?;
-        let ahead: Pose6 = core::array::from_fn(|i| t.pose[i] + t.velocity[i] * VELOCITY_STEP_S);
-        let qd: [f64; AXES] = match arm.inverse_near(&Pose::from_pose6(&ahead), &q) {
-            Ok(q2) => core::array::from_fn(|i| (q2.0[i] - q.0[i]) / VELOCITY_STEP_S),
-            Err(_) => [0.0; AXES],
-        };
+        let qd = self.joint_velocity(&t.pose, &q, &t.velocity, VELOCITY_STEP_S);
         let mut share = 0.0f64;
         for i in 0..AXES {
             share = share.max(qd[i].abs() / (arm.limits.speed[i] * JOINT_LIMIT_FRACTION));
@@ -397,6 +393,17 @@ impl StrokeGenerator {
         t.joints = q;
         t.joint_velocity = qd.map(|x| x * slow);
         Ok(())
+    }
+
+    /// The joint velocity at `q` (the joints of `pose`) of the TCP velocity
+    /// `v`: the joints of the pose `step` s along `v` (before it, for a
+    /// negative step), differenced; zero where that pose has none.
+    fn joint_velocity(&self, pose: &Pose6, q: &Joints, v: &Pose6, step: f64) -> [f64; AXES] {
+        let moved: Pose6 = core::array::from_fn(|i| pose[i] + v[i] * step);
+        match self.lim.arm.inverse_near(&Pose::from_pose6(&moved), q) {
+            Ok(q2) => core::array::from_fn(|i| (q2.0[i] - q.0[i]) / step),
+            Err(_) => [0.0; AXES],
+        }
     }
 
     /// Takes a new plan: re-plans towards it from the current state. A plan
@@ -465,12 +472,7 @@ impl StrokeGenerator {
     pub(crate) fn override_state(&mut self, p: Pose6, v: Pose6, _a: Pose6) {
         let arm = &self.lim.arm;
         if let Ok(q) = arm.inverse_near(&Pose::from_pose6(&p), &Joints(self.q)) {
-            let dt = self.lim.dt;
-            let before: Pose6 = core::array::from_fn(|i| p[i] - v[i] * dt);
-            let qd = match arm.inverse_near(&Pose::from_pose6(&before), &q) {
-                Ok(q0) => core::array::from_fn(|i| (q.0[i] - q0.0[i]) / dt),
-                Err(_) => [0.0; AXES],
-            };
+            let qd = self.joint_velocity(&p, &q, &v, -self.lim.dt);
             self.q = q.0;
             self.qd = qd;
             self.qdd = [0.0; AXES];

@@ -29,8 +29,6 @@ pub struct MotionLimits {
     pub home: Pose6,
     /// The fastest bat speed a plan may ask for, m/s.
     pub max_bat_speed: f64,
-    /// Follow-through time after the hit, s.
-    pub follow_through: f64,
     /// Base yaw in T, rad: the angle of B's x axis about T's z axis.
     pub base_yaw: f64,
     /// Base origin in T, m.
@@ -58,7 +56,6 @@ impl MotionLimits {
             jmax: cat(l.jerk_m_s3, rad(l.rot_jerk_deg_s3)),
             home: cat(r.home.xyz_m, home_abc),
             max_bat_speed: l.max_bat_speed_m_s,
-            follow_through: r.rsi.follow_through_s,
             base_yaw: r.base_yaw(),
             base_xyz: r.cell.base_in_table_xyz_m,
             arm: r.arm(),

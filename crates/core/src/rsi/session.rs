@@ -89,8 +89,7 @@ impl ServoCompensation {
         if !self.enabled || self.lag_s <= 0.0 {
             return 0.0;
         }
-        let alpha = 1.0 - (-dt / self.lag_s).exp();
-        1.0 / alpha - 1.0
+        1.0 / crate::calib::robot::lag_step(dt, self.lag_s) - 1.0
     }
 }
 

@@ -34,6 +34,11 @@ use topspin_core::time::Instant;
 /// The longest dead time the mock models, cycles.
 pub const MAX_DEAD_TIME_CYCLES: usize = 32;
 
+/// A pose in KUKA's units (mm, degrees A/B/C) as a kinematics pose (m, rad).
+fn kuka_pose(p: &[f64; 6]) -> Pose {
+    Pose::from_xyz_abc([p[0], p[1], p[2]].map(|x| x * 1e-3), [p[3], p[4], p[5]].map(f64::to_radians))
+}
+
 /// How RKorr is applied.
 #[derive(Copy, Clone, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum CorrMode {
@@ -199,12 +204,10 @@ impl MockController {
         assert!((cfg.dead_time_cycles as usize) < MAX_DEAD_TIME_CYCLES, "dead time too long");
         // The joints of the start pose: the solution nearest `start_joints`
         // (a robot restarted off home stands where it stopped).
-        let c = &cfg.start;
-        let start = Pose::from_xyz_abc([c[0], c[1], c[2]].map(|x| x * 1e-3), [c[3], c[4], c[5]].map(f64::to_radians));
-        let q0 = cfg.arm.inverse_near(&start, &cfg.start_joints).unwrap_or(cfg.start_joints);
+        let q0 = cfg.arm.inverse_near(&kuka_pose(&cfg.start), &cfg.start_joints).unwrap_or(cfg.start_joints);
         let line = VecDeque::from(vec![q0; cfg.dead_time_cycles as usize]);
         let dt = cfg.cycle_ms as f64 * 1e-3;
-        let lag_step = if cfg.lag_s > 0.0 { 1.0 - (-dt / cfg.lag_s).exp() } else { 1.0 };
+        let lag_step = topspin_core::calib::robot::lag_step(dt, cfg.lag_s);
         MockController {
             ipoc: cfg.first_ipoc,
             correction: [0.0; 6],
@@ -376,9 +379,7 @@ impl MockController {
     /// commanded joints, within the software limit switches and off the
     /// singular wrist; else the robot stops.
     fn command_joints(&mut self) {
-        let c = &self.commanded;
-        let pose = Pose::from_xyz_abc([c[0], c[1], c[2]].map(|x| x * 1e-3), [c[3], c[4], c[5]].map(f64::to_radians));
-        match self.cfg.arm.inverse_near(&pose, &self.q_cmd) {
+        match self.cfg.arm.inverse_near(&kuka_pose(&self.commanded), &self.q_cmd) {
             Ok(q) => match self.cfg.arm.limits.check_position(&q) {
                 Ok(()) => self.q_cmd = q,
                 Err(v) => self.stopped = Some(StopReason::Axis(v)),
