@@ -37,6 +37,10 @@ pub(crate) struct TableFile {
     pub table: Table,
 }
 
+/// The least share of the hitting window the arm must reach for a cell to
+/// load ([`Calibration::window_reach`]).
+pub const MIN_WINDOW_REACH: f64 = 0.5;
+
 /// Where and how the robot meets the ball (`calib/strike.toml`).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -134,10 +138,44 @@ pub enum CalibError {
 }
 
 fn parse<T: for<'de> Deserialize<'de>>(text: &str, path: &Path) -> Result<T, CalibError> {
-    toml::from_str(text).map_err(|e| CalibError::Parse {
-        path: path.to_owned(),
-        message: e.message().to_owned() + &e.span().map(|s| format!(" (at byte {})", s.start)).unwrap_or_default(),
+    toml::from_str(text).map_err(|e| {
+        let message = match e.span().map(|s| (key_at(text, s.start), s.start)) {
+            Some((Some((key, line)), _)) => format!("`{key}` (line {line}): {}", e.message()),
+            Some((None, at)) => format!("{} (at byte {at})", e.message()),
+            None => e.message().to_owned(),
+        };
+        CalibError::Parse { path: path.to_owned(), message }
     })
+}
+
+/// The dotted key (`section.key`) whose value holds byte `at` of a TOML
+/// text, and the 1-based line of `at`: the last `key =` line at or before
+/// it under the last `[section]` header (values may span lines, as arrays
+/// do). `None` before any key.
+fn key_at(text: &str, at: usize) -> Option<(String, usize)> {
+    let before = text.get(..at.min(text.len()))?;
+    let (mut section, mut key) = (None, None);
+    for line in before.lines() {
+        let line = line.trim_start();
+        if line.starts_with('#') {
+            continue;
+        }
+        let header = line.trim_start_matches('[').split(']').next().map(str::trim);
+        if line.starts_with('[')
+            && let Some(header) = header
+            && !header.is_empty()
+            && header.chars().all(|c| c.is_alphanumeric() || "_-.\" ".contains(c))
+        {
+            (section, key) = (Some(header), None);
+        } else if let Some((k, _)) = line.split_once('=')
+            && !k.trim().is_empty()
+            && !k.contains(['"', ',', '['])
+        {
+            key = Some(k.trim());
+        }
+    }
+    let line = before.lines().count().max(1);
+    Some((section.map_or_else(|| key.map(str::to_owned), |s| key.map(|k| format!("{s}.{k}")))?, line))
 }
 
 fn read_or_default(dir: Option<&Path>, name: &str, default: &'static str) -> Result<(String, PathBuf), CalibError> {
@@ -280,7 +318,50 @@ impl Calibration {
                 value: strike.hit_plane_x,
             });
         }
-        Ok(Calibration { physics, table, strike, robot })
+        let cell = Calibration { physics, table, strike, robot };
+        // The arm must reach most of the window, not only its box: a base
+        // measured in the wrong place leaves the box inside POSCORR but the
+        // window outside the arm's joints.
+        let reach = cell.window_reach();
+        if reach < MIN_WINDOW_REACH {
+            return Err(CalibError::OutOfRange {
+                path,
+                key: "strike.window_y × strike.window_z (the share of the window at strike.hit_plane_x that \
+                      the arm reaches from cell.base_in_table_xyz_m within joints.min_deg / joints.max_deg; \
+                      at least 0.5 needed)",
+                value: reach,
+            });
+        }
+        Ok(cell)
+    }
+
+    /// The share of the hitting window the arm reaches: of a 13 × 12 grid
+    /// over `strike.window_y` × `strike.window_z` on the hitting plane, the
+    /// points where the bat, held as at home, has a joint solution within
+    /// the software limits and off the singular wrist. The default cell
+    /// reaches 0.95 of it (not the high, wide corners).
+    pub fn window_reach(&self) -> f64 {
+        const NY: usize = 13;
+        const NZ: usize = 12;
+        let arm = self.robot.arm();
+        let home = self.robot.home_pose();
+        let Some(home_q) = self.robot.home_joints(&arm) else { return 0.0 };
+        let s = &self.strike;
+        let mut reached = 0;
+        for iy in 0..NY {
+            for iz in 0..NZ {
+                let y = s.window_y[0] + (s.window_y[1] - s.window_y[0]) * iy as f64 / (NY - 1) as f64;
+                let z = s.window_z[0] + (s.window_z[1] - s.window_z[0]) * iz as f64 / (NZ - 1) as f64;
+                let target = crate::kinematics::Pose {
+                    position: self.robot.t_to_b(crate::physics::Vec3::new(s.hit_plane_x, y, z)),
+                    rotation: home.rotation,
+                };
+                if arm.inverse_near(&target, &home_q).is_ok_and(|q| arm.limits.check_position(&q).is_ok()) {
+                    reached += 1;
+                }
+            }
+        }
+        reached as f64 / (NY * NZ) as f64
     }
 
     /// The same cell with the paper's constant physics coefficients.
@@ -325,5 +406,38 @@ mod tests {
         let e = Calibration::load(Some(&dir)).unwrap_err().to_string();
         assert!(e.contains("strike.window_y") && e.contains("workspace"), "{e}");
         std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn a_value_of_the_wrong_type_is_named_by_its_key() {
+        let robot = DEFAULT_ROBOT.replacen("speed_deg_s = [360.0,", "speed_deg_s = [\"fast\",", 1);
+        let e = Calibration::load_with_robot(None, &robot).map(|_| ()).unwrap_err().to_string();
+        assert!(e.contains("`joints.speed_deg_s` (line ") && e.contains("\"fast\""), "{e}");
+        let robot = DEFAULT_ROBOT.replacen("lag_ms = ", "lag_ms = \"15\" # ", 1);
+        let e = Calibration::load_with_robot(None, &robot).map(|_| ()).unwrap_err().to_string();
+        assert!(e.contains("`servo.lag_ms`"), "{e}");
+    }
+
+    #[test]
+    fn the_default_arm_reaches_most_of_the_window() {
+        let reach = Calibration::default_cell().window_reach();
+        assert!((0.90..=0.97).contains(&reach), "{reach}");
+    }
+
+    #[test]
+    fn an_arm_that_cannot_reach_the_window_is_refused() {
+        // A lab that fences A1 to ±20° (a narrower software limit switch)
+        // keeps home and the workspace box, but the bat no longer gets wider
+        // than |y_T| ≈ 0.16 m on the hitting plane.
+        let robot = DEFAULT_ROBOT
+            .replace("min_deg = [-170.0,", "min_deg = [-20.0,")
+            .replace("max_deg = [170.0,", "max_deg = [20.0,");
+        let e = Calibration::load_with_robot(None, &robot).map(|_| ()).unwrap_err().to_string();
+        assert!(e.contains("strike.window_y") && e.contains("joints.min_deg") && e.contains("reaches"), "{e}");
+        // ±60° still reaches most of it.
+        let robot = DEFAULT_ROBOT
+            .replace("min_deg = [-170.0,", "min_deg = [-60.0,")
+            .replace("max_deg = [170.0,", "max_deg = [60.0,");
+        assert!(Calibration::load_with_robot(None, &robot).is_ok());
     }
 }
