@@ -4,8 +4,9 @@
 //! cores, so each hot thread of the daemon (RSI, estimator, ingest), the
 //! mock KR C4 and the simulated tracker get a physical core of their own
 //! with SCHED_FIFO, the RSI loop and the estimator busy-poll (as `topspin
-//! doctor` advises), and everything else (telemetry, `--load` hogs, the
-//! main thread) shares the cores left over.
+//! doctor` advises), and telemetry and the `--load` hogs share the cores
+//! left over (the main thread, which only waits, stays unpinned: the
+//! threads it spawns inherit its CPU set and pin themselves inside it).
 //!
 //! [`plan`] is the pure choice of cores from the CPUs this process may use
 //! and their topology; [`read_topology`] is its thin I/O shell over sysfs.
@@ -54,7 +55,7 @@ pub struct Placement {
     pub ingest: usize,
     pub mock_krc: usize,
     pub tracker: usize,
-    /// Telemetry, hogs and the main thread: the cores no dedicated thread has.
+    /// Telemetry and hogs: the cores no dedicated thread has.
     pub rest: Vec<usize>,
     /// SMT siblings of the dedicated CPUs, left idle so that they do not
     /// share a core's execution units with a hot thread.
