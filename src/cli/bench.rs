@@ -276,3 +276,36 @@ fn latency(a: LatencyArgs) -> anyhow::Result<()> {
     }
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn each_thread_reports_what_it_got_not_what_it_asked() {
+        let fifo = |core, p| ThreadSpec { core: Some(core), priority: Some(p) };
+        let threads = [
+            ("rsi", fifo(5, 80)),
+            ("estimator", fifo(4, 60)),
+            ("mock-krc", fifo(2, 50)),
+            ("telemetry", ThreadSpec { core: Some(0), priority: None }),
+            ("tracker", ThreadSpec::default()),
+        ];
+        let refused = [
+            RtWarning { thread: "estimator", what: RtRefused::Fifo { priority: 60, errno: 1 } },
+            RtWarning { thread: "mock-krc", what: RtRefused::Pin { core: 2 } },
+            RtWarning { thread: "process", what: RtRefused::Mlock { errno: 12 } },
+        ];
+        let got = obtained(&threads, &refused.iter().collect::<Vec<_>>());
+        assert_eq!(
+            serde_json::Value::Object(got),
+            json!({
+                "rsi": { "core": 5, "sched": "SCHED_FIFO 80" },
+                "estimator": { "core": 4, "sched": "SCHED_OTHER" },
+                "mock-krc": { "core": null, "sched": "SCHED_FIFO 50" },
+                "telemetry": { "core": 0, "sched": "SCHED_OTHER" },
+                "tracker": { "core": null, "sched": "SCHED_OTHER" },
+            })
+        );
+    }
+}
