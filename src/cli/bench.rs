@@ -1,7 +1,8 @@
 //! `topspin bench latency`: the daemon threads against the mock KR C4
 //! (4 ms) and a full-rate simulated tracker stream for a set duration, with
 //! an optional CPU hog; reports the two latency histograms (RSI answer,
-//! observation → plan) and the late RSI answers.
+//! observation → plan) and the late RSI answers. `--layout` says where the
+//! threads run ([`super::bench_layout`]).
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -10,8 +11,11 @@ use clap::{Args, Subcommand};
 use serde_json::json;
 
 use super::BadInput;
+use super::bench_layout::{self, HELPER_PRIORITY, Layout, Placement};
 use topspin_core::calib::Calibration;
 use topspin_daemon::rsi_server::WaitStrategy;
+use topspin_daemon::runtime::daemon::ThreadSpec;
+use topspin_daemon::runtime::rt::{self, RtRefused, RtWarning};
 use topspin_sim::demo::{DemoConfig, Latencies, run_loopback};
 use topspin_sim::probe;
 
@@ -21,18 +25,38 @@ pub enum BenchCommand {
     Latency(LatencyArgs),
 }
 
+const LATENCY_HELP: &str = "\
+Examples:
+  topspin bench latency --duration 600 --load 1            # the shared layout: any core, normal scheduling
+  sudo topspin bench latency --layout dedicated --duration 600 --json
+                                                           # a core and SCHED_FIFO each for RSI, estimator,
+                                                           # ingest, mock KR C4 and tracker (6 physical cores)
+
+--layout dedicated exits 2 with one line where this process may use fewer
+than 6 physical cores (taskset, cpuset, SMT siblings count once) or may not
+use SCHED_FIFO (root, or CAP_SYS_NICE with an RLIMIT_RTPRIO).";
+
 #[derive(Debug, Args)]
+#[command(after_help = LATENCY_HELP)]
 pub struct LatencyArgs {
     /// How long to stream balls, s.
     #[arg(long, default_value_t = 60.0)]
     pub duration: f64,
-    /// Busy threads loading the CPU meanwhile (0: none).
+    /// Busy threads loading the CPU meanwhile (0: none); with `--layout
+    /// dedicated` they run on the leftover cores.
     #[arg(long, default_value_t = 0)]
     pub load: usize,
-    /// The RSI loop's wait strategy.
-    #[arg(long, value_enum, default_value_t = WaitStrategy::Blocking)]
-    pub rsi_wait: WaitStrategy,
-    /// The estimator spins on its ring instead of parking.
+    /// Where the threads run: `shared` (any core, normal scheduling) or
+    /// `dedicated` (RSI, estimator, ingest, mock KR C4 and tracker each on
+    /// a physical core of its own with SCHED_FIFO; RSI and estimator busy-poll).
+    #[arg(long, value_enum, default_value_t = Layout::Shared)]
+    pub layout: Layout,
+    /// The RSI loop's wait strategy [default: blocking; busy-poll with
+    /// `--layout dedicated`].
+    #[arg(long, value_enum)]
+    pub rsi_wait: Option<WaitStrategy>,
+    /// The estimator spins on its ring instead of parking (always with
+    /// `--layout dedicated`).
     #[arg(long)]
     pub estimator_busy_poll: bool,
     #[arg(long)]
@@ -63,14 +87,65 @@ fn hog(stop: Arc<AtomicBool>) {
     }
 }
 
+/// The dedicated layout's cores on this machine, or the one line why not:
+/// too few physical cores, or no SCHED_FIFO.
+fn dedicated_placement() -> Result<Placement, BadInput> {
+    let cpus = bench_layout::read_topology(&rt::allowed_cpus());
+    let placement = bench_layout::plan(&cpus).map_err(|e| BadInput(e.to_string()))?;
+    rt::fifo_permitted().map_err(|errno| {
+        BadInput(format!(
+            "--layout dedicated needs SCHED_FIFO (root, or CAP_SYS_NICE with an RLIMIT_RTPRIO): refused with errno {errno}"
+        ))
+    })?;
+    Ok(placement)
+}
+
+/// What each thread got: its core (none where pinning was refused) and
+/// its policy (SCHED_FIFO unless asked for none or refused).
+fn obtained(
+    threads: &[(&'static str, ThreadSpec)],
+    refused: &[&RtWarning],
+) -> serde_json::Map<String, serde_json::Value> {
+    threads
+        .iter()
+        .map(|(name, spec)| {
+            let mine = |f: fn(&RtRefused) -> bool| refused.iter().any(|w| w.thread == *name && f(&w.what));
+            let core = spec.core.filter(|_| !mine(|r| matches!(r, RtRefused::Pin { .. })));
+            let sched = match spec.priority {
+                Some(p) if !mine(|r| matches!(r, RtRefused::Fifo { .. })) => format!("SCHED_FIFO {p}"),
+                _ => "SCHED_OTHER".to_owned(),
+            };
+            (name.to_string(), json!({ "core": core, "sched": sched }))
+        })
+        .collect()
+}
+
 fn latency(a: LatencyArgs) -> anyhow::Result<()> {
     if !(a.duration.is_finite() && a.duration >= 2.0) {
         return Err(BadInput(format!("--duration {} must be at least 2 s", a.duration)).into());
     }
+    let placement = match a.layout {
+        Layout::Shared => None,
+        Layout::Dedicated => Some(dedicated_placement()?),
+    };
     let gap = 1.2;
     let mut cfg = DemoConfig { balls: (a.duration / gap).ceil() as usize, gap, ..DemoConfig::default() };
-    cfg.runtime.rsi_wait = a.rsi_wait;
-    cfg.runtime.estimator_busy_poll = a.estimator_busy_poll;
+    cfg.runtime.rsi_wait = a.rsi_wait.unwrap_or(match a.layout {
+        Layout::Shared => WaitStrategy::Blocking,
+        Layout::Dedicated => WaitStrategy::BusyPoll,
+    });
+    cfg.runtime.estimator_busy_poll = a.estimator_busy_poll || placement.is_some();
+    if let Some(p) = &placement {
+        let r = &mut cfg.runtime;
+        r.realtime = true;
+        r.rsi.core = Some(p.rsi);
+        r.estimator.core = Some(p.estimator);
+        r.ingest.core = Some(p.ingest);
+        r.telemetry.core = Some(p.rest[0]);
+        cfg.mock_thread = ThreadSpec { core: Some(p.mock_krc), priority: Some(HELPER_PRIORITY) };
+        cfg.tracker_thread = ThreadSpec { core: Some(p.tracker), priority: Some(HELPER_PRIORITY) };
+    }
+    let rsi_wait = cfg.runtime.rsi_wait;
     let probe_stop = Arc::new(AtomicBool::new(false));
     let probe = match a.live {
         Some(addr) if !a.no_live_client => {
@@ -84,20 +159,41 @@ fn latency(a: LatencyArgs) -> anyhow::Result<()> {
     };
     cfg.live = a.live;
     let stop = Arc::new(AtomicBool::new(false));
+    let rest = placement.as_ref().map(|p| p.rest.clone());
     let hogs: Vec<_> = (0..a.load)
-        .map(|_| {
+        .map(|i| {
             let s = stop.clone();
-            std::thread::spawn(move || hog(s))
+            let core = rest.as_ref().map(|r| r[i % r.len()]);
+            std::thread::spawn(move || {
+                if let Some(c) = core {
+                    // Off the hot cores; a refusal only moves the load.
+                    let _ = rt::pin_current("hog", c);
+                }
+                hog(s)
+            })
         })
         .collect();
     if !a.json {
         eprintln!(
-            "topspin bench latency: {} s of balls every {gap} s at 150 Hz, RSI 4 ms, {} CPU hog thread(s), RSI wait {:?}, live view {}",
+            "topspin bench latency: {} s of balls every {gap} s at 150 Hz, RSI 4 ms, {} CPU hog thread(s), RSI wait {:?}, estimator busy-poll {}, live view {}",
             a.duration,
             a.load,
-            a.rsi_wait,
+            rsi_wait,
+            cfg.runtime.estimator_busy_poll,
             a.live.map_or("off".to_string(), |x| format!("on ws://{x}"))
         );
+        if let Some(p) = &placement {
+            eprintln!(
+                "layout dedicated: RSI on CPU {}, estimator {}, ingest {}, mock KR C4 {}, tracker {}, the rest on {} (idle SMT siblings: {})",
+                p.rsi,
+                p.estimator,
+                p.ingest,
+                p.mock_krc,
+                p.tracker,
+                bench_layout::cpu_list(&p.rest),
+                bench_layout::cpu_list(&p.idle)
+            );
+        }
     }
     let r = run_loopback(&cfg, &Calibration::default_cell());
     stop.store(true, Ordering::Relaxed);
@@ -120,13 +216,31 @@ fn latency(a: LatencyArgs) -> anyhow::Result<()> {
         })
     });
     let lat = Latencies::of(&r.daemon.telemetry);
+    let rt_cfg = &cfg.runtime;
+    let hot = |s: ThreadSpec| ThreadSpec { priority: s.priority.filter(|_| rt_cfg.realtime), ..s };
+    let threads = [
+        ("rsi", hot(rt_cfg.rsi)),
+        ("estimator", hot(rt_cfg.estimator)),
+        ("ingest", hot(rt_cfg.ingest)),
+        ("telemetry", ThreadSpec { priority: None, ..rt_cfg.telemetry }),
+        ("mock-krc", cfg.mock_thread),
+        ("tracker", cfg.tracker_thread),
+    ];
+    let refused: Vec<&RtWarning> =
+        r.daemon.warnings.iter().chain(&r.mock.rt_warnings).chain(&r.tracker_warnings).collect();
+    let got = obtained(&threads, &refused);
     if a.json {
         println!(
             "{}",
             json!({
                 "duration_s": a.duration,
+                "layout": a.layout,
+                "cpus_allowed": rt::allowed_cpus(),
+                "cores": placement,
+                "threads": got,
                 "load_threads": a.load,
-                "rsi_wait": format!("{:?}", a.rsi_wait),
+                "rsi_wait": format!("{:?}", rsi_wait),
+                "estimator_busy_poll": cfg.runtime.estimator_busy_poll,
                 "rsi_cycles": r.mock.cycles,
                 "late_rsi_answers": r.mock.late,
                 "observations": r.daemon.ingest.accepted,
@@ -154,8 +268,44 @@ fn latency(a: LatencyArgs) -> anyhow::Result<()> {
             println!("  {topic:24} {:7} messages {:9} bytes  {}", c.messages, c.bytes, c.schema_name);
         }
     }
-    for w in &r.daemon.warnings {
+    for (name, t) in &got {
+        println!("thread {name:10} core {:5} {}", t["core"].to_string(), t["sched"].as_str().unwrap_or(""));
+    }
+    for w in &refused {
         println!("warning: {w}");
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn each_thread_reports_what_it_got_not_what_it_asked() {
+        let fifo = |core, p| ThreadSpec { core: Some(core), priority: Some(p) };
+        let threads = [
+            ("rsi", fifo(5, 80)),
+            ("estimator", fifo(4, 60)),
+            ("mock-krc", fifo(2, 50)),
+            ("telemetry", ThreadSpec { core: Some(0), priority: None }),
+            ("tracker", ThreadSpec::default()),
+        ];
+        let refused = [
+            RtWarning { thread: "estimator", what: RtRefused::Fifo { priority: 60, errno: 1 } },
+            RtWarning { thread: "mock-krc", what: RtRefused::Pin { core: 2 } },
+            RtWarning { thread: "process", what: RtRefused::Mlock { errno: 12 } },
+        ];
+        let got = obtained(&threads, &refused.iter().collect::<Vec<_>>());
+        assert_eq!(
+            serde_json::Value::Object(got),
+            json!({
+                "rsi": { "core": 5, "sched": "SCHED_FIFO 80" },
+                "estimator": { "core": 4, "sched": "SCHED_OTHER" },
+                "mock-krc": { "core": null, "sched": "SCHED_FIFO 50" },
+                "telemetry": { "core": 0, "sched": "SCHED_OTHER" },
+                "tracker": { "core": null, "sched": "SCHED_OTHER" },
+            })
+        );
+    }
 }

@@ -112,6 +112,7 @@ pub fn run(a: DemoArgs) -> anyhow::Result<()> {
         record: a.record.clone(),
         late_limit: a.late_limit,
         tracker_faults: a.tracker_faults.then(topspin_sim::faults::TrackerFaults::all),
+        ..DemoConfig::default()
     };
     if !a.json {
         eprintln!(

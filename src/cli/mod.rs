@@ -5,6 +5,7 @@
 use clap::{Parser, Subcommand};
 
 pub mod bench;
+pub mod bench_layout;
 pub mod calibrate;
 pub mod check;
 pub mod crops;

@@ -35,7 +35,8 @@ use topspin_core::stats::Summary;
 use topspin_core::time::{Duration, Instant};
 use topspin_core::wire::crop::{CROP_MAX_LEN, Crop};
 use topspin_daemon::clock;
-use topspin_daemon::runtime::daemon::{Daemon, DaemonSummary, LinkState, RuntimeConfig};
+use topspin_daemon::runtime::daemon::{Daemon, DaemonSummary, LinkState, RuntimeConfig, ThreadSpec};
+use topspin_daemon::runtime::rt::RtWarning;
 pub use topspin_daemon::runtime::telemetry::{Latencies, Latency};
 
 pub use topspin_core::plan::{HIT_RADIUS, HIT_WINDOW};
@@ -69,6 +70,12 @@ pub struct DemoConfig {
     /// Tracker-side faults injected into the stream (`sim::faults`); the
     /// foreign ball comes from 127.0.0.2.
     pub tracker_faults: Option<TrackerFaults>,
+    /// The mock KR C4 thread's core and SCHED_FIFO priority (default:
+    /// neither, the scheduler's choice).
+    pub mock_thread: ThreadSpec,
+    /// The simulated tracker's: set, it streams from a thread of its own
+    /// with these; default, from the calling thread as it is.
+    pub tracker_thread: ThreadSpec,
 }
 
 /// After a live client connects, time given it to subscribe.
@@ -88,6 +95,8 @@ impl Default for DemoConfig {
             record: None,
             late_limit: None,
             tracker_faults: None,
+            mock_thread: ThreadSpec::default(),
+            tracker_thread: ThreadSpec::default(),
         }
     }
 }
@@ -193,6 +202,8 @@ pub struct LoopbackRun {
     pub mock: mock_krc::MockResult,
     pub daemon: DaemonSummary,
     pub injected: Option<InjectedCounts>,
+    /// What the OS refused of [`DemoConfig::tracker_thread`].
+    pub tracker_warnings: Vec<RtWarning>,
 }
 
 /// Runs the demo end to end and judges every stroke.
@@ -230,6 +241,7 @@ pub fn run_loopback(cfg: &DemoConfig, cal: &Calibration) -> std::io::Result<Loop
     mcfg.bind = "127.0.0.1:0".parse().expect("literal");
     mcfg.cycles = None;
     mcfg.seed = cfg.seed;
+    mcfg.thread = cfg.mock_thread;
     if let Some(d) = cfg.answer_deadline {
         mcfg.answer_deadline = d;
     }
@@ -267,20 +279,35 @@ pub fn run_loopback(cfg: &DemoConfig, cal: &Calibration) -> std::io::Result<Loop
         _ => None,
     };
     let never = AtomicBool::new(false);
-    let injected = match &cfg.tracker_faults {
-        None => {
-            stream(&tracker, &balls, &starts, cfg.tracker.latency, t0, &never)?;
-            None
+    let tracker_addr = daemon.tracker_addr;
+    let send = || -> std::io::Result<Option<InjectedCounts>> {
+        match &cfg.tracker_faults {
+            None => {
+                stream(&tracker, &balls, &starts, cfg.tracker.latency, t0, &never)?;
+                Ok(None)
+            }
+            Some(f) => {
+                let clean = plan_datagrams(&balls, &starts, cfg.tracker.latency, t0);
+                let (plan, counts) = inject(&clean, f, cfg.seed);
+                // Another loopback address: not the configured tracker source.
+                let foreign = UdpSocket::bind("127.0.0.2:0")?;
+                foreign.connect(tracker_addr)?;
+                send_planned(&tracker, Some(&foreign), &plan, &never)?;
+                Ok(Some(counts))
+            }
         }
-        Some(f) => {
-            let clean = plan_datagrams(&balls, &starts, cfg.tracker.latency, t0);
-            let (plan, counts) = inject(&clean, f, cfg.seed);
-            // Another loopback address: not the configured tracker source.
-            let foreign = UdpSocket::bind("127.0.0.2:0")?;
-            foreign.connect(daemon.tracker_addr)?;
-            send_planned(&tracker, Some(&foreign), &plan, &never)?;
-            Some(counts)
-        }
+    };
+    let (injected, tracker_warnings) = if cfg.tracker_thread == ThreadSpec::default() {
+        (send()?, Vec::new())
+    } else {
+        let spec = cfg.tracker_thread;
+        std::thread::scope(|s| {
+            let h = std::thread::Builder::new().name("tracker".into()).spawn_scoped(s, || {
+                let refused = topspin_daemon::runtime::rt::setup_current("tracker", spec.core, spec.priority);
+                send().map(|i| (i, refused))
+            })?;
+            h.join().map_err(|_| std::io::Error::other("tracker stream panicked"))?
+        })?
     };
     if let Some(c) = camera {
         c.join().map_err(|_| std::io::Error::other("crop stream panicked"))??;
@@ -308,7 +335,7 @@ pub fn run_loopback(cfg: &DemoConfig, cal: &Calibration) -> std::io::Result<Loop
     }
     let mock = mock.stop()?;
     let daemon = daemon.join()?;
-    Ok(LoopbackRun { balls, starts, t0, mock, daemon, injected })
+    Ok(LoopbackRun { balls, starts, t0, mock, daemon, injected, tracker_warnings })
 }
 
 /// The daemon configuration the demo amounts to (tracker noise and latency).

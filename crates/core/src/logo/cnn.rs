@@ -336,15 +336,25 @@ pub fn fit_crops(
 /// The committed compact model, relative to the repository root.
 pub(crate) const DEFAULT_MODEL: &str = "models/logo-compact.onnx";
 
+/// Where the Debian package installs the committed model (Cargo.toml,
+/// `[package.metadata.deb]`).
+pub const INSTALLED_MODEL: &str = "/usr/share/topspin/models/logo-compact.onnx";
+
 /// The default model's path: `$TOPSPIN_LOGO_MODEL`, else [`DEFAULT_MODEL`]
 /// at the workspace root when it exists (a source checkout), else
-/// the relative path.
+/// [`INSTALLED_MODEL`] when it exists (the package), else the relative path.
 pub fn default_model() -> PathBuf {
     if let Some(p) = std::env::var_os("TOPSPIN_LOGO_MODEL") {
         return PathBuf::from(p);
     }
     let in_tree = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..").join(DEFAULT_MODEL);
-    if in_tree.is_file() { in_tree } else { PathBuf::from(DEFAULT_MODEL) }
+    if in_tree.is_file() {
+        in_tree
+    } else if Path::new(INSTALLED_MODEL).is_file() {
+        PathBuf::from(INSTALLED_MODEL)
+    } else {
+        PathBuf::from(DEFAULT_MODEL)
+    }
 }
 
 /// Angle between two orientations, degrees, sign-aware (q ≡ −q).

@@ -48,7 +48,7 @@ impl fmt::Display for RtWarning {
 }
 
 /// Pins the calling thread to `core`.
-pub(crate) fn pin_current(thread: &'static str, core: usize) -> Result<(), RtWarning> {
+pub fn pin_current(thread: &'static str, core: usize) -> Result<(), RtWarning> {
     let ok = core_affinity::get_core_ids()
         .and_then(|ids| ids.into_iter().find(|c| c.id == core))
         .is_some_and(core_affinity::set_for_current);
@@ -70,7 +70,7 @@ fn errno() -> i32 {
 
 /// Gives the calling thread SCHED_FIFO at `priority` (1–99).
 #[allow(unsafe_code)]
-pub(crate) fn fifo_current(thread: &'static str, priority: i32) -> Result<(), RtWarning> {
+pub fn fifo_current(thread: &'static str, priority: i32) -> Result<(), RtWarning> {
     let param = libc::sched_param { sched_priority: priority };
     // SAFETY: pthread_self() is the calling thread's valid handle and
     // `param` a valid sched_param that outlives the call.
@@ -88,7 +88,7 @@ pub(crate) fn lock_memory() -> Result<(), RtWarning> {
 
 /// Pins and prioritises the calling thread as configured; returns what was
 /// refused.
-pub(crate) fn setup_current(thread: &'static str, core: Option<usize>, priority: Option<i32>) -> Vec<RtWarning> {
+pub fn setup_current(thread: &'static str, core: Option<usize>, priority: Option<i32>) -> Vec<RtWarning> {
     let mut warnings = Vec::new();
     if let Some(c) = core
         && let Err(w) = pin_current(thread, c)
@@ -101,6 +101,25 @@ pub(crate) fn setup_current(thread: &'static str, core: Option<usize>, priority:
         warnings.push(w);
     }
     warnings
+}
+
+/// The CPUs this process may run on (its affinity mask, which `taskset`,
+/// a cgroup's cpuset or the unit's `CPUAffinity=` narrow), ascending;
+/// empty where the mask cannot be read.
+pub fn allowed_cpus() -> Vec<usize> {
+    let mut ids: Vec<usize> = core_affinity::get_core_ids().unwrap_or_default().into_iter().map(|c| c.id).collect();
+    ids.sort_unstable();
+    ids
+}
+
+/// Whether this process may use SCHED_FIFO: a throw-away thread asks for
+/// priority 1. `Err(errno)` where refused (EPERM without CAP_SYS_NICE or
+/// an `RLIMIT_RTPRIO`).
+pub fn fifo_permitted() -> Result<(), i32> {
+    std::thread::spawn(|| fifo_current("probe", 1)).join().map_err(|_| 0)?.map_err(|w| match w.what {
+        RtRefused::Fifo { errno, .. } => errno,
+        _ => 0,
+    })
 }
 
 #[cfg(test)]

@@ -16,6 +16,8 @@ use super::faults::{FaultInjector, Faults, Link, MAX_DATAGRAM, UdpLink};
 use topspin_core::calib::RobotFile;
 use topspin_core::time::{Duration, Instant};
 use topspin_daemon::clock::{self, SPIN_BEFORE_DEADLINE};
+use topspin_daemon::runtime::daemon::ThreadSpec;
+use topspin_daemon::runtime::rt::{self, RtWarning};
 
 /// How the mock runs.
 #[derive(Clone, Debug, PartialEq)]
@@ -36,6 +38,10 @@ pub struct MockKrcConfig {
     pub answer_deadline: Duration,
     pub faults: Faults,
     pub seed: u64,
+    /// The mock thread's core and SCHED_FIFO priority ([`spawn`] only;
+    /// default: neither). `topspin bench latency --layout dedicated` gives
+    /// it a core of its own, as the real controller has its own hardware.
+    pub thread: ThreadSpec,
 }
 
 impl MockKrcConfig {
@@ -82,6 +88,7 @@ impl MockKrcConfig {
             answer_deadline: Duration::from_millis(robot.rsi.cycle_ms as u64),
             faults: Faults::default(),
             seed: 1,
+            thread: ThreadSpec::default(),
         }
     }
 
@@ -124,6 +131,8 @@ pub struct MockResult {
     /// a stretched `answer_deadline`).
     pub answers_after_cycle: u64,
     pub path: Vec<PathSample>,
+    /// What the OS refused of [`MockKrcConfig::thread`].
+    pub rt_warnings: Vec<RtWarning>,
 }
 
 impl MockResult {
@@ -214,7 +223,12 @@ pub fn spawn(cfg: MockKrcConfig) -> io::Result<MockHandle> {
     let s = stop.clone();
     let jog = Arc::new(JogPort::default());
     let j = jog.clone();
-    let join = std::thread::Builder::new().name("mock-krc".into()).spawn(move || run_on(link, &cfg, &s, Some(&j)))?;
+    let join = std::thread::Builder::new().name("mock-krc".into()).spawn(move || {
+        let refused = rt::setup_current("mock-krc", cfg.thread.core, cfg.thread.priority);
+        let mut r = run_on(link, &cfg, &s, Some(&j))?;
+        r.rt_warnings = refused;
+        Ok(r)
+    })?;
     Ok(MockHandle { stop, local_addr, jog, join })
 }
 
