@@ -8,7 +8,13 @@
 //!   every channel (the recording's own and the viewer's), with messages on
 //!   the scene and plot channels, `record::read_session` still reads it and
 //!   `topspin replay`'s comparison finds every plan identical, and its
-//!   `--live` path (the recording through the viewer) reaches a client.
+//!   `--live` path (the recording through the viewer) reaches a client;
+//! - the arm: on `/view/robot` of the recording, and again of its replay
+//!   through the viewer, `arm_actual`'s joints are the forward kinematics
+//!   of the `AIPos` the mock sent in that cycle (`ipoc`), the foot on the
+//!   calibrated base, the bat at `RIst`; the commanded ghost is there and
+//!   leads it; every arm and TCP entity has a lifetime; log times never
+//!   run backwards.
 //!
 //! No timing is asserted: the mock's answer deadline is stretched as in
 //! `tests/demo.rs`, and the verdicts are not checked here.
@@ -23,9 +29,13 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use foxglove::Decode;
 use foxglove::messages::{FrameTransform, PosesInFrame, SceneUpdate};
 use topspin_core::calib::Calibration;
+use topspin_core::kinematics::{FRAMES, Joints};
+use topspin_core::physics::Vec3;
+use topspin_core::rsi::codec::RobFrame;
 use topspin_core::time::Duration;
 use topspin_daemon::record::replay::replay_session;
-use topspin_daemon::record::{TOPIC_COUNTERS, TOPIC_DATAGRAM, TOPIC_PLAN, TOPIC_RSI, read_session};
+use topspin_daemon::record::sink::RecordingSink;
+use topspin_daemon::record::{Recorder, Session, TOPIC_COUNTERS, TOPIC_DATAGRAM, TOPIC_PLAN, TOPIC_RSI, read_session};
 use topspin_daemon::viewer::replay::view_session;
 use topspin_daemon::viewer::{LiveServer, TOPICS, Topic, ViewerSink};
 use topspin_sim::demo::{DemoConfig, run};
@@ -149,6 +159,19 @@ fn a_demo_recording_opens_and_holds_every_channel() {
 
     let session = read_session(&path).unwrap();
     assert!(session.truncated.is_none(), "{:?}", session.truncated);
+    let arms = check_the_arm(&bytes, &session);
+    eprintln!("recorded arms: {arms}");
+    // The recording through the viewer (`topspin replay FILE --live`'s
+    // path) into a second file: the same arm from the recorded requests.
+    let again = dir.path().join("again.mcap");
+    let cal = session.calibration().unwrap();
+    let rec = RecordingSink::new(Recorder::create(&again, &session.config, &session.calib_files).unwrap());
+    let mut sink = ViewerSink::new(&cal, None, Some(rec), None).with_offset(session.log_time_offset);
+    view_session(&session, &mut sink, None, &AtomicBool::new(false)).unwrap();
+    drop(sink);
+    let replayed = check_the_arm(&std::fs::read(&again).unwrap(), &session);
+    // One every fifth cycle in both (the replay starts its count afresh).
+    assert!(replayed.abs_diff(arms) <= 1, "replayed {replayed}, recorded {arms}");
     assert!(!session.plans.is_empty());
     // The demo's recording replays bit for bit, as the daemon's does.
     let replay = replay_session(&session).unwrap();
@@ -177,4 +200,77 @@ fn a_demo_recording_opens_and_holds_every_channel() {
     for (at, _) in &session.counters {
         assert!(at.as_nanos() < first_datagram.as_nanos() + 60_000_000_000, "{at:?}");
     }
+}
+
+/// Checks `/view/robot` in the MCAP `bytes` against the RSI requests of
+/// `session` (see the module doc); returns the `arm_actual` entities seen.
+fn check_the_arm(bytes: &[u8], session: &Session) -> usize {
+    let cal = session.calibration().unwrap();
+    let arm = cal.robot.arm();
+    let base = Vec3::from(cal.robot.cell.base_in_table_xyz_m);
+    let requests: BTreeMap<u64, RobFrame> =
+        session.exchanges.iter().map(|x| RobFrame::parse(&x.request).unwrap()).map(|r| (r.ipoc, r)).collect();
+    let points = |e: &foxglove::messages::SceneEntity| -> Vec<Vec3> {
+        e.spheres
+            .iter()
+            .map(|s| {
+                let p = s.pose.as_ref().unwrap().position.unwrap();
+                Vec3::new(p.x, p.y, p.z)
+            })
+            .collect()
+    };
+    let (mut arms, mut ghosts, mut last_log) = (0, 0, 0);
+    // Per message: the actual and the commanded bat in T.
+    let mut bats: Vec<(Vec3, Vec3)> = Vec::new();
+    for m in mcap::MessageStream::new(bytes).unwrap() {
+        let m = m.unwrap();
+        if m.channel.topic != Topic::Robot.name() {
+            continue;
+        }
+        assert!(m.log_time >= last_log, "/view/robot ran backwards: {} after {last_log}", m.log_time);
+        last_log = m.log_time;
+        let scene = SceneUpdate::decode(&m.data[..]).unwrap();
+        let mut actual_tcp = None;
+        for e in &scene.entities {
+            if e.id != "bat_plan" {
+                assert!(e.lifetime.is_some_and(|l| l.sec() > 0 || l.nsec() > 0), "{} without a lifetime", e.id);
+            }
+            if !e.id.starts_with("arm_") {
+                continue;
+            }
+            assert_eq!(e.frame_id, "table");
+            let ipoc: u64 = e.metadata.iter().find(|kv| kv.key == "ipoc").unwrap().value.parse().unwrap();
+            let rob = &requests[&ipoc];
+            let (deg, rist) = (if e.id == "arm_actual" { rob.aipos } else { rob.aspos }.unwrap(), rob.rist.unwrap());
+            let want = arm.frames(&Joints::from_degrees(deg)).map(|f| cal.robot.b_to_t(f.position));
+            let got = points(e);
+            assert_eq!(got, want, "{} of ipoc {ipoc}", e.id);
+            assert_eq!(e.cylinders.len(), FRAMES - 1);
+            assert_eq!(got[0], base);
+            let tcp = got[FRAMES - 1];
+            if e.id == "arm_actual" {
+                arms += 1;
+                // RIst is the FK of the joints, both sent with 4 decimals.
+                let rist_t = cal.robot.b_to_t(Vec3::new(rist.x, rist.y, rist.z) * 1e-3);
+                assert!((tcp - rist_t).norm() < 1e-5, "ipoc {ipoc}: bat {tcp:?}, RIst {rist_t:?}");
+                actual_tcp = Some(tcp);
+            } else {
+                ghosts += 1;
+                assert!(e.cylinders.iter().all(|c| c.color.unwrap().a < 1.0));
+                bats.push((actual_tcp.expect("the actual arm first"), tcp));
+            }
+        }
+    }
+    assert!(arms > 100, "{arms} arms");
+    assert_eq!(ghosts, arms);
+    // Ahead: where the ghost is furthest from the arm (in a stroke), the
+    // arm gets there within the next 100 ms (5 messages), the robot's
+    // dead time and lag later.
+    let (k, lead) = bats.iter().map(|(a, c)| (a - c).norm()).enumerate().max_by(|a, b| a.1.total_cmp(&b.1)).unwrap();
+    assert!(lead > 0.01, "the ghost at most {lead} m from the arm");
+    let ghost = bats[k].1;
+    let later = bats[k + 1..(k + 6).min(bats.len())].iter().map(|(a, _)| (a - ghost).norm()).fold(f64::MAX, f64::min);
+    assert!(later < lead / 2.0, "the ghost {lead} m ahead, the arm no nearer than {later} m in 100 ms");
+    eprintln!("the ghost up to {:.1} mm ahead; the arm {:.1} mm from there within 100 ms", lead * 1e3, later * 1e3);
+    arms
 }

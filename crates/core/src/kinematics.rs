@@ -68,6 +68,8 @@ use crate::physics::Vec3;
 
 /// The number of axes.
 pub const AXES: usize = 6;
+/// The frames of [`ArmGeometry::frames`]: the base, one per axis, the TCP.
+pub const FRAMES: usize = AXES + 2;
 
 /// The most solutions one pose has: shoulder front/back × elbow up/down ×
 /// wrist flipped or not.
@@ -376,7 +378,9 @@ impl ArmGeometry {
         self.shoulder_offset + self.upper_arm + self.forearm.hypot(self.elbow_offset)
     }
 
-    /// Forward kinematics of `q`.
+    /// Forward kinematics of `q` (the hot paths' share of
+    /// [`frames`](Self::frames), computed the same way: bit for bit its
+    /// wrist, flange and TCP, tested).
     pub fn forward(&self, q: &Joints) -> ArmPose {
         let q = &q.0;
         let r1 = rz(-q[0]);
@@ -392,6 +396,43 @@ impl ArmGeometry {
         let r6 = r5 * rx(-q[5]);
         let flange = Pose { position: p6, rotation: r6 * ry90() };
         ArmPose { wrist, flange, tcp: flange.compose(&self.tool) }
+    }
+
+    /// Every link frame of `q` in B, foot to bat ([`FRAMES`] of them):
+    /// `[0]` B itself (the foot, on the A1 axis); `[i]`, i = 1..=6, joint
+    /// Ai's frame (link i): at the joint's origin, turned by the joint
+    /// (`[5]` is the wrist centre, `[6]` link_6 at the flange, whose
+    /// `$FLANGE` is `[6]`·Ry(90°)); `[7]` the TCP, the same as
+    /// [`forward`](Self::forward)'s. Consecutive origins are the ends of
+    /// the arm's links (the foot's column, the shoulder offset, the upper
+    /// arm, the elbow offset, the forearm, the wrist, the tool). A fixed
+    /// array: nothing allocated.
+    pub fn frames(&self, q: &Joints) -> [Pose; FRAMES] {
+        let q = &q.0;
+        let p1 = Vec3::new(0.0, 0.0, self.shoulder_height);
+        let r1 = rz(-q[0]);
+        let p2 = p1 + r1 * Vec3::new(self.shoulder_offset, 0.0, 0.0);
+        let r2 = r1 * ry(q[1]);
+        let p3 = p2 + r2 * Vec3::new(self.upper_arm, 0.0, 0.0);
+        let r3 = r2 * ry(q[2]);
+        let p4 = p3 + r3 * Vec3::new(0.0, 0.0, self.elbow_offset);
+        let r4 = r3 * rx(-q[3]);
+        let wrist = p4 + r4 * Vec3::new(self.forearm, 0.0, 0.0);
+        let r5 = r4 * ry(q[4]);
+        let p6 = wrist + r5 * Vec3::new(self.flange, 0.0, 0.0);
+        let r6 = r5 * rx(-q[5]);
+        let flange = Pose { position: p6, rotation: r6 * ry90() };
+        let at = |position, rotation| Pose { position, rotation };
+        [
+            Pose::identity(),
+            at(p1, r1),
+            at(p2, r2),
+            at(p3, r3),
+            at(p4, r4),
+            at(wrist, r5),
+            at(p6, r6),
+            flange.compose(&self.tool),
+        ]
     }
 
     /// The TCP pose of `q` (forward kinematics).
@@ -608,6 +649,11 @@ impl Arm {
     /// The TCP of `q`.
     pub fn tcp(&self, q: &Joints) -> Pose {
         self.geometry.tcp(q)
+    }
+
+    /// Every link frame of `q` ([`ArmGeometry::frames`]).
+    pub fn frames(&self, q: &Joints) -> [Pose; FRAMES] {
+        self.geometry.frames(q)
     }
 
     /// Every solution for `tcp` ([`ArmGeometry::inverse`]).
@@ -827,6 +873,53 @@ mod tests {
             let urdf = Pose { position: t.translation.vector, rotation: t.rotation.to_rotation_matrix() };
             let (dp, dr) = f.distance(&urdf);
             assert!(dp < 1e-12 && dr < 1e-12, "{q:?}: {dp:e} {dr:e}");
+        }
+    }
+
+    #[test]
+    fn frames_are_the_description_chain_link_by_link() {
+        // KUKA home: the column, the shoulder offset, the upper arm up, the
+        // elbow offset, the forearm forward, the flange down, the bat below.
+        let g = ArmGeometry::kr6_r900_sixx(bat());
+        let f = g.frames(&Joints::kuka_home());
+        let origins = [
+            [0.0, 0.0, 0.0],
+            [0.0, 0.0, 0.400],
+            [0.025, 0.0, 0.400],
+            [0.025, 0.0, 0.855],
+            [0.025, 0.0, 0.890],
+            [0.445, 0.0, 0.890],
+            [0.445, 0.0, 0.810],
+            [0.445, 0.0, 0.610],
+        ];
+        for (k, o) in origins.iter().enumerate() {
+            assert!(close(f[k].position, *o), "frame {k}: {:?}", f[k].position);
+        }
+        assert_eq!(f[0], Pose::identity());
+
+        // Across the joint space: frame i is the URDF's chain through joint
+        // i; the last three are forward's wrist, flange and TCP, bit for bit.
+        let axes =
+            [[0.0, 0.0, -1.0], [0.0, 1.0, 0.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]];
+        let mut rng = Rng(11);
+        for _ in 0..1000 {
+            let q = rng.joints_within(&arm().limits);
+            let f = g.frames(&q);
+            let mut t = Isometry3::identity();
+            for i in 0..AXES {
+                let [x, y, z] = KR6_R900_SIXX_ORIGINS[i];
+                let axis = Unit::new_normalize(Vector3::from(axes[i]));
+                t *= Isometry3::from_parts(Translation3::new(x, y, z), UnitQuaternion::from_axis_angle(&axis, q.0[i]));
+                let urdf = Pose { position: t.translation.vector, rotation: t.rotation.to_rotation_matrix() };
+                let (dp, dr) = f[i + 1].distance(&urdf);
+                assert!(dp < 1e-12 && dr < 1e-12, "{q:?}, frame {}: {dp:e} {dr:e}", i + 1);
+            }
+            let fk = g.forward(&q);
+            assert_eq!(f[FRAMES - 1], fk.tcp);
+            assert_eq!(f[5].position, fk.wrist);
+            assert_eq!(f[6].position, fk.flange.position);
+            assert_eq!(f[6].rotation * ry90(), fk.flange.rotation);
+            assert_eq!(arm().frames(&q), f);
         }
     }
 

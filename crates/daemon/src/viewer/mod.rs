@@ -19,7 +19,7 @@
 //! | `/view/cell` | `foxglove.SceneUpdate` | table, lines and net; robot base and workspace box (in `robot_base`); the hitting window — again every [`CELL_INTERVAL_S`] for clients that join later |
 //! | `/tf` | `foxglove.FrameTransform` | `table` → `robot_base` |
 //! | `/view/ball` | `foxglove.SceneUpdate` | each observation (`obs/<n>`, [`OBS_LIFETIME_S`]; cyan tracked, grey not tracked, red rejected by the EKF gate), the EKF estimate (`ekf`), the predicted path through the bounce to the hitting plane (`prediction`, with the crossing `hit`) after every observation, the spin arrow with its magnitude (`spin`), the logo direction (`logo`); these five expire [`TRACK_LIFETIME_S`] after their last update |
-//! | `/view/robot` | `foxglove.SceneUpdate` | the planned bat (`bat_plan`: a disc at the hitting point, its velocity arrow), the actual and commanded TCP (`tcp_actual`, `tcp_commanded`, in `robot_base`) |
+//! | `/view/robot` | `foxglove.SceneUpdate` | the planned bat (`bat_plan`: a disc at the hitting point, its velocity arrow); the arm from the forward kinematics of the actual joints (`arm_actual`, from `AIPos`: a cylinder per link, a sphere per joint and at the TCP, in `table`, metadata `ipoc`) and its ghost from the commanded joints (`arm_commanded`, from `ASPos`: translucent, ahead of the actual by the dead time and lag) (`viewer::arm`); the actual and commanded TCP (`tcp_actual`, `tcp_commanded`, bat discs in `robot_base`); the arm and TCP every [`TCP_DECIMATION`]th RSI cycle, expiring [`ROBOT_LIFETIME_S`] after their last update |
 //! | `/view/plan_pose` | `foxglove.PoseInFrame` | the planned bat pose (`table`) |
 //! | `/view/tcp` | `foxglove.PosesInFrame` | `[actual, commanded]` TCP (`robot_base`), every [`TCP_DECIMATION`]th RSI cycle |
 //! | `/view/verdict` | `foxglove.SceneUpdate` | the demo only: hit or miss per ball at its true hitting point |
@@ -36,6 +36,7 @@
 //!
 //! Log times are wall clock: the monotonic time + [`crate::clock::unix_offset_ns`].
 
+pub(crate) mod arm;
 pub mod live;
 pub mod replay;
 pub mod sink;
@@ -57,6 +58,11 @@ pub(crate) const OBS_LIFETIME_S: f64 = 2.0;
 /// How long the current ball's EKF estimate, prediction, hit, spin and logo
 /// stay after their last update, s (then the scene is clear for the next).
 pub(crate) const TRACK_LIFETIME_S: f64 = 0.5;
+/// How long the arm and TCP entities of `/view/robot` stay after their
+/// last update, s: they are refreshed every [`TCP_DECIMATION`] RSI cycles
+/// (20 ms), so they vanish half a second after the controller goes silent
+/// or stops sending their element.
+pub(crate) const ROBOT_LIFETIME_S: f64 = 0.5;
 /// One `/view/tcp` and TCP scene message every this many RSI cycles.
 pub(crate) const TCP_DECIMATION: u64 = 5;
 /// Spacing of the predicted path's points, s.
@@ -167,6 +173,16 @@ pub(crate) fn quat_x_to(d: topspin_core::physics::Vec3) -> fm::Quaternion {
     fm::Quaternion { x: qx / norm, y: qy / norm, z: qz / norm, w: w / norm }
 }
 
+/// The rotation taking +z onto `d` (a cylinder's axis; identity for a
+/// zero vector): +z to +x (a quarter turn about y), then +x to `d`.
+pub(crate) fn quat_z_to(d: topspin_core::physics::Vec3) -> fm::Quaternion {
+    let h = std::f64::consts::FRAC_1_SQRT_2;
+    if !(d.norm().is_finite() && d.norm() > 1e-12) {
+        return IDENTITY;
+    }
+    qmul(quat_x_to(d), fm::Quaternion { x: 0.0, y: h, z: 0.0, w: h })
+}
+
 /// A pose from a position and a rotation.
 pub fn pose(p: topspin_core::physics::Vec3, q: fm::Quaternion) -> fm::Pose {
     fm::Pose { position: Some(v3(p)), orientation: Some(q) }
@@ -182,7 +198,8 @@ mod tests {
     use super::*;
     use topspin_core::physics::Vec3;
 
-    fn rotate(q: fm::Quaternion, v: Vec3) -> Vec3 {
+    /// `v` turned by `q`.
+    pub(crate) fn rotate(q: fm::Quaternion, v: Vec3) -> Vec3 {
         let p = fm::Quaternion { x: v.x, y: v.y, z: v.z, w: 0.0 };
         let c = fm::Quaternion { x: -q.x, y: -q.y, z: -q.z, w: q.w };
         let r = qmul(qmul(q, p), c);
@@ -195,6 +212,17 @@ mod tests {
             let r = rotate(quat_x_to(d), Vec3::x());
             assert!((r - d.normalize()).norm() < 1e-12, "{d:?} → {r:?}");
         }
+    }
+
+    #[test]
+    fn z_goes_to_the_direction() {
+        for d in
+            [Vec3::new(0.0, 0.0, 2.0), Vec3::new(0.0, 0.0, -1.0), Vec3::new(-1.0, 0.0, 0.0), Vec3::new(0.3, -0.4, 0.5)]
+        {
+            let r = rotate(quat_z_to(d), Vec3::z());
+            assert!((r - d.normalize()).norm() < 1e-12, "{d:?} → {r:?}");
+        }
+        assert_eq!(quat_z_to(Vec3::zeros()), IDENTITY);
     }
 
     #[test]

@@ -10,10 +10,11 @@ use foxglove::Encode;
 use foxglove::messages as fm;
 use serde::Serialize;
 
+use super::arm::{self, ArmView};
 use super::{
     CELL_INTERVAL_S, FRAME_BASE, FRAME_TABLE, IDENTITY, LiveServer, OBS_LIFETIME_S, PREDICTION_HORIZON_S,
-    PREDICTION_STEP_S, PredictionErrorPlot, RsiPlot, SPIN_ARROW_M_PER_RPS, SpinPlot, TCP_DECIMATION, TOPICS,
-    TRACK_LIFETIME_S, Topic, color, p3, pose, quat_x_to, quat_zyx, stamp, v3,
+    PREDICTION_STEP_S, PredictionErrorPlot, ROBOT_LIFETIME_S, RsiPlot, SPIN_ARROW_M_PER_RPS, SpinPlot, TCP_DECIMATION,
+    TOPICS, TRACK_LIFETIME_S, Topic, color, p3, pose, quat_x_to, quat_zyx, stamp, v3,
 };
 use crate::record::sink::RecordingSink;
 use crate::runtime::telemetry::{
@@ -21,6 +22,7 @@ use crate::runtime::telemetry::{
 };
 use topspin_core::calib::Calibration;
 use topspin_core::estimator::EstimatorEvent;
+use topspin_core::kinematics::Joints;
 use topspin_core::physics::propagate::{Event, StopAt};
 use topspin_core::physics::{BallState, Propagator, Vec3, rad_to_rps};
 use topspin_core::plan::StrikePlan;
@@ -127,6 +129,7 @@ struct BallView {
 /// The telemetry sink behind the live view and the recording's viewer channels.
 pub struct ViewerSink {
     cal: Calibration,
+    arm: ArmView,
     prop: Propagator,
     out: Outputs,
     ball: BallView,
@@ -163,6 +166,7 @@ impl ViewerSink {
     ) -> Self {
         ViewerSink {
             cal: cal.clone(),
+            arm: ArmView::new(&cal.robot),
             prop: cal.propagator(),
             out: Outputs {
                 live,
@@ -526,22 +530,41 @@ impl ViewerSink {
             let (k, s) = (sen.rkorr?, self.start_pose?);
             Some(KukaPose::from_array(std::array::from_fn(|i| s.to_array()[i] + k.to_array()[i])))
         });
-        let kpose = |k: &KukaPose| {
-            pose(Vec3::new(k.x, k.y, k.z) * 1e-3, quat_zyx(k.a.to_radians(), k.b.to_radians(), k.c.to_radians()))
-        };
         let ts = Some(stamp(self.out.wall(r.arrival)));
-        let mut poses = vec![kpose(&actual)];
-        poses.extend(commanded.as_ref().map(kpose));
+        let mut poses = vec![kuka_pose(&actual)];
+        poses.extend(commanded.as_ref().map(kuka_pose));
         self.out.proto(Topic::Tcp, &fm::PosesInFrame { timestamp: ts, frame_id: FRAME_BASE.into(), poses }, r.arrival);
-        let mut entities = Vec::with_capacity(2);
+        let entities = self.robot_entities(r.arrival, &rob, commanded);
+        self.out.proto(Topic::Robot, &fm::SceneUpdate { deletions: vec![], entities }, r.arrival);
+    }
+
+    /// The robot of one `<Rob>` on `/view/robot`: the arm from the actual
+    /// joints (`AIPos`) and its ghost from the commanded ones (`ASPos`), in
+    /// T; the actual (`RIst`) and `commanded` TCP as bat discs in B. An element the
+    /// controller does not send draws nothing; each expires
+    /// [`ROBOT_LIFETIME_S`] after its last update.
+    fn robot_entities(&self, at: Instant, rob: &RobFrame, commanded: Option<KukaPose>) -> Vec<fm::SceneEntity> {
+        let lifetime = Some(fm::Duration::saturating_from_secs_f64(ROBOT_LIFETIME_S));
+        let mut entities = Vec::with_capacity(4);
+        for (id, axes, style) in
+            [("arm_actual", rob.aipos, &arm::ACTUAL), ("arm_commanded", rob.aspos, &arm::COMMANDED)]
+        {
+            let Some(deg) = axes else { continue };
+            let mut e = fm::SceneEntity { lifetime, ..self.entity(at, FRAME_TABLE, id) };
+            e.metadata.push(fm::KeyValuePair { key: "ipoc".into(), value: rob.ipoc.to_string() });
+            self.arm.draw(&mut e, &Joints::from_degrees(deg), style);
+            if !e.spheres.is_empty() {
+                entities.push(e);
+            }
+        }
         for (id, k, c) in [
-            ("tcp_actual", Some(actual), color(0.1, 1.0, 0.3, 1.0)),
+            ("tcp_actual", rob.rist, color(0.1, 1.0, 0.3, 1.0)),
             ("tcp_commanded", commanded, color(1.0, 0.2, 0.8, 0.6)),
         ] {
             let Some(k) = k else { continue };
-            let mut e = self.entity(r.arrival, FRAME_BASE, id);
+            let mut e = fm::SceneEntity { lifetime, ..self.entity(at, FRAME_BASE, id) };
             e.cylinders.push(fm::CylinderPrimitive {
-                pose: Some(kpose(&k)),
+                pose: Some(kuka_pose(&k)),
                 size: Some(v3(Vec3::new(2.0 * BAT_RADIUS, 2.0 * BAT_RADIUS, 0.008))),
                 bottom_scale: 1.0,
                 top_scale: 1.0,
@@ -549,7 +572,7 @@ impl ViewerSink {
             });
             entities.push(e);
         }
-        self.out.proto(Topic::Robot, &fm::SceneUpdate { deletions: vec![], entities }, r.arrival);
+        entities
     }
 
     /// The demo's verdicts, once the actual TCP has passed each true hit.
@@ -695,6 +718,11 @@ impl TelemetrySink for ViewerSink {
     }
 }
 
+/// A KUKA pose (mm, degrees A/B/C) as Foxglove's (m, quaternion).
+fn kuka_pose(k: &KukaPose) -> fm::Pose {
+    pose(Vec3::new(k.x, k.y, k.z) * 1e-3, quat_zyx(k.a.to_radians(), k.b.to_radians(), k.c.to_radians()))
+}
+
 /// `/logo/fit` on the crop of `l`: the ball's circle and the detected logo,
 /// both in the crop's pixels (the image `/logo/crop` shows).
 fn logo_annotations(l: &LogoRecord, ts: Option<fm::Timestamp>) -> fm::ImageAnnotations {
@@ -744,6 +772,47 @@ mod tests {
         assert_eq!(s.out.log_time(Topic::Robot, Instant(16_000_000)), o + 16_000_000);
         // Another topic keeps its own times.
         assert_eq!(s.out.log_time(Topic::PlanPose, Instant(10_000_000)), o + 10_000_000);
+    }
+
+    /// One `<Rob>` draws the actual arm at its `AIPos`, the ghost at its
+    /// `ASPos`, and both TCP discs, each with a lifetime; a `<Rob>` without
+    /// the joints (an older SEND list, an older recording) only the discs.
+    #[test]
+    fn the_arm_is_drawn_from_the_joints_the_controller_sends() {
+        let s = sink();
+        let cal = Calibration::default_cell();
+        let (aipos, aspos) = ([10.0, -80.0, 95.0, 5.0, 60.0, -20.0], [12.0, -78.0, 93.0, 5.5, 61.0, -19.0]);
+        let k = KukaPose::from_array([350.0, 0.0, 450.0, 180.0, 0.0, 0.0]);
+        let rob = RobFrame {
+            ipoc: 4208831,
+            rist: Some(k),
+            rsol: Some(k),
+            aipos: Some(aipos),
+            aspos: Some(aspos),
+            delay: Some(0),
+        };
+        let entities = s.robot_entities(Instant(4_000_000), &rob, rob.rsol);
+        let ids: Vec<_> = entities.iter().map(|e| e.id.as_str()).collect();
+        assert_eq!(ids, ["arm_actual", "arm_commanded", "tcp_actual", "tcp_commanded"]);
+        let view = ArmView::new(&cal.robot);
+        for (e, deg) in entities.iter().zip([aipos, aspos]) {
+            assert_eq!(e.frame_id, FRAME_TABLE);
+            assert_eq!((e.metadata[0].key.as_str(), e.metadata[0].value.as_str()), ("ipoc", "4208831"));
+            let want = view.points(&Joints::from_degrees(deg));
+            let got: Vec<_> = e.spheres.iter().map(|s| s.pose.as_ref().unwrap().position.unwrap()).collect();
+            assert_eq!(got, want.map(v3));
+            // The foot on the calibrated base in T.
+            assert_eq!(want[0], Vec3::from(cal.robot.cell.base_in_table_xyz_m));
+        }
+        assert!(entities[1].spheres.iter().all(|s| s.color.unwrap().a < 1.0), "the ghost is translucent");
+        for e in &entities {
+            let life = e.lifetime.expect("a lifetime");
+            assert!((life.sec() as f64 + life.nsec() as f64 * 1e-9 - ROBOT_LIFETIME_S).abs() < 1e-9, "{}", e.id);
+        }
+
+        let old = RobFrame { aipos: None, aspos: None, ..rob };
+        let ids: Vec<_> = s.robot_entities(Instant(4_000_000), &old, old.rsol).into_iter().map(|e| e.id).collect();
+        assert_eq!(ids, ["tcp_actual", "tcp_commanded"]);
     }
 
     #[test]
