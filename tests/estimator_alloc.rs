@@ -2,9 +2,6 @@
 //! observations of balls back to back (with noise, dropouts, outliers and
 //! silences) through `Estimator::observe`, counted by a global allocator.
 
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
-
 use rand::{Rng, SeedableRng};
 use rand_distr::{Distribution, Normal};
 use topspin_core::calib::Calibration;
@@ -12,33 +9,11 @@ use topspin_core::estimator::{Estimator, EstimatorConfig};
 use topspin_core::physics::{BallState, Event, StopAt, Vec3};
 use topspin_core::time::Instant;
 
-struct Counting;
-
-static COUNTING: AtomicBool = AtomicBool::new(false);
-static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
-
-// SAFETY: forwards to the system allocator unchanged; only counts.
-#[allow(unsafe_code)]
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        if COUNTING.load(Ordering::Relaxed) {
-            ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
-        }
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        unsafe { System.dealloc(ptr, layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        if COUNTING.load(Ordering::Relaxed) {
-            ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
-        }
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
+#[path = "alloc_counter/mod.rs"]
+mod alloc_counter;
 
 #[global_allocator]
-static GLOBAL: Counting = Counting;
+static GLOBAL: alloc_counter::Counting = alloc_counter::Counting;
 
 /// Observations of `balls` launcher-like balls at 150 Hz, 0.4 s apart.
 fn stream(balls: usize, seed: u64) -> Vec<(f64, Vec3)> {
@@ -95,11 +70,11 @@ fn ten_thousand_observations_allocate_nothing() {
     for &(t, p) in warm {
         plans += est.observe(Instant::from_secs_f64(t), p).plan.is_some() as usize;
     }
-    COUNTING.store(true, Ordering::SeqCst);
-    for &(t, p) in hot {
-        plans += est.observe(Instant::from_secs_f64(t), p).plan.is_some() as usize;
-    }
-    COUNTING.store(false, Ordering::SeqCst);
-    assert_eq!(ALLOCATIONS.load(Ordering::SeqCst), 0, "allocations on the hot path");
+    let ((), allocations) = alloc_counter::count_on_this_thread(|| {
+        for &(t, p) in hot {
+            plans += est.observe(Instant::from_secs_f64(t), p).plan.is_some() as usize;
+        }
+    });
+    assert_eq!(allocations, 0, "allocations on the hot path");
     assert!(plans > 1_000, "only {plans} plans");
 }
