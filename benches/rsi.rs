@@ -28,6 +28,7 @@ fn bench(c: &mut Criterion) {
                 sentype: "ImFree",
                 estr: None,
                 rkorr: Some(KukaPose::from_array([12.3, -3.2, 40.0, 0.0, 28.0, 0.0])),
+                akorr: None,
                 ipoc: 4208831,
             }
             .emit(4, black_box(&mut out))
