@@ -1,14 +1,16 @@
 //! The per-cycle path (parse, plan, generate, filter, emit) allocates
-//! nothing after construction: a counting allocator proves it.
+//! nothing after construction, in both correction modes (axis: also our
+//! inverse kinematics per cycle): a counting allocator proves it.
 
 use std::alloc::System;
 
 use stats_alloc::{INSTRUMENTED_SYSTEM, Region, StatsAlloc};
 use topspin_core::calib::Calibration;
+use topspin_core::motion::MotionLimits;
 use topspin_core::physics::Vec3;
 use topspin_core::plan::{EulerZyx, StrikePlan};
 use topspin_core::rsi::codec::{KukaPose, RobElement, RobFrame};
-use topspin_core::rsi::session::{MAX_ANSWER_LEN, RsiSession, SessionConfig};
+use topspin_core::rsi::session::{Correction, MAX_ANSWER_LEN, RsiSession, SessionConfig};
 use topspin_core::time::Instant;
 
 #[global_allocator]
@@ -16,8 +18,19 @@ static GLOBAL: &StatsAlloc<System> = &INSTRUMENTED_SYSTEM;
 
 #[test]
 fn the_cycle_path_does_not_allocate() {
+    // One test, both modes in turn: the counting allocator is global, and
+    // tests in one binary run in parallel.
+    for c in Correction::ALL {
+        cycles_do_not_allocate(c);
+    }
+}
+
+fn cycles_do_not_allocate(correction: Correction) {
     let cal = Calibration::default_cell();
-    let mut s = RsiSession::new(SessionConfig::from_calibration(&cal, "ImFree")).unwrap();
+    let mut cfg = SessionConfig::from_calibration(&cal, "ImFree");
+    cfg.correction = correction;
+    let mut s = RsiSession::new(cfg).unwrap();
+    let home_joints = MotionLimits::from_robot(&cal.robot).home_joints.degrees();
     let mut req = [0u8; 1024];
     let mut out = [0u8; MAX_ANSWER_LEN];
     let all = [RobElement::RIst, RobElement::RSol, RobElement::AIPos, RobElement::ASPos, RobElement::Delay];
@@ -40,8 +53,8 @@ fn the_cycle_path_does_not_allocate() {
             ipoc: 100 + 4 * k,
             rist: Some(home),
             rsol: Some(home),
-            aipos: Some([0.0; 6]),
-            aspos: Some([0.0; 6]),
+            aipos: Some(home_joints),
+            aspos: Some(home_joints),
             delay: Some(0),
         }
         .emit(&all, 4, &mut req)
@@ -56,10 +69,17 @@ fn the_cycle_path_does_not_allocate() {
         cycle(k, &mut s);
     }
     let region = Region::new(GLOBAL);
+    let mut moved = 0.0f64;
     for k in 5..400 {
         cycle(k, &mut s);
+        moved = s.last_axis_correction().iter().fold(moved, |m, a| m.max(a.abs()));
     }
     let stats = region.change();
-    assert_eq!(stats.allocations, 0, "{stats:?}");
-    assert_eq!(stats.reallocations, 0, "{stats:?}");
+    assert_eq!(stats.allocations, 0, "{correction}: {stats:?}");
+    assert_eq!(stats.reallocations, 0, "{correction}: {stats:?}");
+    assert_eq!(s.stats().answers, 400);
+    if correction == Correction::Axis {
+        assert_eq!(s.stats().axis_held, 0);
+        assert!(moved > 1.0, "the stroke moved the axes ({moved}°)");
+    }
 }

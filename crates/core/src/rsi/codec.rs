@@ -563,7 +563,8 @@ mod tests {
             Err(CodecError::MissingAttribute { element: "AKorr", attr: "A6" })
         );
         for bad in ["nan", "inf", "1e999", "", "1,5", "0x10", "--1"] {
-            let x = format!(r#"<Sen Type="T"><AKorr A1="0" A2="{bad}" A3="0" A4="0" A5="0" A6="0"/><IPOC>1</IPOC></Sen>"#);
+            let x =
+                format!(r#"<Sen Type="T"><AKorr A1="0" A2="{bad}" A3="0" A4="0" A5="0" A6="0"/><IPOC>1</IPOC></Sen>"#);
             assert_eq!(parse(x.as_bytes()), Err(CodecError::BadNumber { element: "AKorr" }), "{bad}");
         }
         assert!(matches!(parse(br#"<Sen Type="T"><AKorr A1="0" A2=0/><IPOC>1</IPOC></Sen>"#), Err(CodecError::Xml(_))));

@@ -132,6 +132,8 @@ impl Pair {
             wrong_type: c.wrong_type,
             malformed: c.malformed,
             poscorr_clamped: c.poscorr_clamped,
+            axiscorr_clamped: c.axiscorr_clamped,
+            wrong_kind: c.wrong_kind,
             stopped: c.stopped,
             peak_speed_share: c.peak_speed_share,
             peak_acceleration_share: c.peak_acceleration_share,
