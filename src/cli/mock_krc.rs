@@ -158,6 +158,7 @@ pub fn run(a: MockKrcArgs) -> anyhow::Result<()> {
             "malformed": r.malformed,
             "poscorr_clamped": r.poscorr_clamped,
             "axiscorr_clamped": r.axiscorr_clamped,
+            "akorr_range_deg": r.akorr_range_deg,
             "max_answer_delay_us": r.max_answer_delay.0 / 1000,
             "peak_speed_share": r.peak_speed_share,
             "peak_acceleration_share": r.peak_acceleration_share,

@@ -169,6 +169,8 @@ pub struct RobotReport {
     /// cycles AXISCORR clamped (axis).
     pub correction: &'static str,
     pub axiscorr_clamped: u64,
+    /// The smallest and largest AKorr per axis A1..A6, degrees (axis).
+    pub akorr_range_deg: [[f64; 2]; 6],
     /// Controller stops (0 or 1: RSI ends with the first) and why.
     pub stops: u64,
     pub stop_reason: Option<String>,
@@ -416,6 +418,7 @@ fn judge(
             compensation: runtime.servo_compensation,
             correction: runtime.correction.key(),
             axiscorr_clamped: mock.axiscorr_clamped,
+            akorr_range_deg: mock.akorr_range_deg,
             stops: mock.stopped.is_some() as u64,
             stop_reason: mock.stopped.map(|r| r.to_string()),
             skipped: summary.telemetry.skipped.clone(),

@@ -292,9 +292,9 @@ mod tests {
         assert_eq!(c.config_file, "topspin_axis_ethernet.xml");
         assert!(c.axiscorr);
         c.check_feeds(&e).unwrap();
-        assert_eq!(c.axis_lower_deg, [-90.0, -60.0, -90.0, -150.0, -60.0, -180.0]);
-        assert_eq!(c.axis_upper_deg, [90.0, 60.0, 30.0, 150.0, 45.0, 180.0]);
-        assert_eq!(c.axis_mon_max_deg, [95.0, 65.0, 95.0, 155.0, 65.0, 185.0]);
+        assert_eq!(c.axis_lower_deg, [-90.0, -60.0, -100.0, -150.0, -66.0, -180.0]);
+        assert_eq!(c.axis_upper_deg, [90.0, 90.0, 30.0, 150.0, 45.0, 180.0]);
+        assert_eq!(c.axis_mon_max_deg, [95.0, 95.0, 105.0, 155.0, 70.0, 185.0]);
         let r = Calibration::default_cell().robot;
         assert_eq!(c.timeout, r.rsi.late_limit);
         // From home, AXISCORR never lets an axis past its software limit switch.
@@ -314,11 +314,13 @@ mod tests {
         assert!(matches!(c.check_feeds(&cart), Err(RsiFileError::Mismatch { object: "POSCORR", .. })));
         // Bad limits are named.
         let bad = AXIS_CONTEXT_XML.replace(
-            "\"LowerLimA3\" ParamID=\"3\" ParamValue=\"-90.0\"",
+            "\"LowerLimA3\" ParamID=\"3\" ParamValue=\"-100.0\"",
             "\"LowerLimA3\" ParamID=\"3\" ParamValue=\"x\"",
         );
+        assert_ne!(bad, AXIS_CONTEXT_XML);
         assert!(matches!(ContextConfig::parse(&bad), Err(RsiFileError::Bad { .. })));
         let bad = AXIS_CONTEXT_XML.replace("ParamValue=\"30.0\"", "ParamValue=\"-5.0\"");
+        assert_ne!(bad, AXIS_CONTEXT_XML);
         assert!(matches!(ContextConfig::parse(&bad), Err(RsiFileError::Bad { .. })));
     }
 }

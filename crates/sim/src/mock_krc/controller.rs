@@ -218,6 +218,9 @@ pub struct MockController {
     pub axiscorr_clamped: u64,
     /// On-time answers with only the other kind of correction (held).
     pub wrong_kind: u64,
+    /// The smallest and largest AKorr asked per axis (before AXISCORR),
+    /// degrees: the range the axis context's limits must cover.
+    pub akorr_range_deg: [[f64; 2]; 6],
     pub cycles: u64,
     /// The fastest any axis turned, as a share of its limit (its peak).
     pub peak_speed_share: f64,
@@ -259,6 +262,7 @@ impl MockController {
             poscorr_clamped: 0,
             axiscorr_clamped: 0,
             wrong_kind: 0,
+            akorr_range_deg: [[0.0; 2]; 6],
             cycles: 0,
             peak_speed_share: 0.0,
             peak_acceleration_share: 0.0,
@@ -439,6 +443,10 @@ impl MockController {
         let mut k = self.correction;
         let mut clamped = false;
         for (i, x) in k.iter_mut().enumerate() {
+            if x.is_finite() {
+                let r = &mut self.akorr_range_deg[i];
+                *r = [r[0].min(*x), r[1].max(*x)];
+            }
             let y = if x.is_finite() { x.clamp(c.axis_lower_deg[i], c.axis_upper_deg[i]) } else { 0.0 };
             clamped |= y != *x;
             *x = y;

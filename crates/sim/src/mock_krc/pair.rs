@@ -134,6 +134,7 @@ impl Pair {
             poscorr_clamped: c.poscorr_clamped,
             axiscorr_clamped: c.axiscorr_clamped,
             wrong_kind: c.wrong_kind,
+            akorr_range_deg: c.akorr_range_deg,
             stopped: c.stopped,
             peak_speed_share: c.peak_speed_share,
             peak_acceleration_share: c.peak_acceleration_share,

@@ -125,6 +125,9 @@ pub struct MockResult {
     pub axiscorr_clamped: u64,
     /// On-time answers carrying only the other kind of correction (held).
     pub wrong_kind: u64,
+    /// The smallest and largest AKorr asked per axis, degrees (axis
+    /// context; zeros otherwise).
+    pub akorr_range_deg: [[f64; 2]; 6],
     /// Why the controller stopped RSI, if it did.
     pub stopped: Option<StopReason>,
     /// The fastest and hardest any axis moved, as shares of its limits.
@@ -314,6 +317,7 @@ fn cycle_loop<L: Link>(
     out.poscorr_clamped = ctrl.poscorr_clamped;
     out.axiscorr_clamped = ctrl.axiscorr_clamped;
     out.wrong_kind = ctrl.wrong_kind;
+    out.akorr_range_deg = ctrl.akorr_range_deg;
     out.stopped = ctrl.stopped;
     out.peak_speed_share = ctrl.peak_speed_share;
     out.peak_acceleration_share = ctrl.peak_acceleration_share;
