@@ -300,9 +300,9 @@ mod tests {
         // From home, AXISCORR never lets an axis past its software limit switch.
         let arm = r.arm();
         let home = r.home_joints(&arm).unwrap().degrees();
-        for i in 0..6 {
+        for (i, h) in home.iter().enumerate() {
             let (lo, hi) = (arm.limits.min[i].to_degrees(), arm.limits.max[i].to_degrees());
-            assert!(home[i] + c.axis_lower_deg[i] >= lo && home[i] + c.axis_upper_deg[i] <= hi, "A{}", i + 1);
+            assert!(h + c.axis_lower_deg[i] >= lo && h + c.axis_upper_deg[i] <= hi, "A{}", i + 1);
             assert!(c.axis_mon_max_deg[i] >= c.axis_lower_deg[i].abs().max(c.axis_upper_deg[i]), "A{}", i + 1);
         }
         let src = include_str!("../../../../rsi/topspin_axis_rsi.src");
