@@ -139,7 +139,8 @@ pub struct ContextConfig {
     /// POSCORRMON: total translation / rotation that stop the robot.
     pub mon_max_trans_mm: f64,
     pub mon_max_rot_deg: f64,
-    /// An AXISCORR object is in the context.
+    /// A POSCORR / an AXISCORR object is in the context.
+    pub poscorr: bool,
     pub axiscorr: bool,
     /// AXISCORR: correction limits per axis A1..A6, degrees.
     pub axis_lower_deg: [f64; 6],
@@ -163,6 +164,7 @@ impl ContextConfig {
             max_rot_deg: f64::INFINITY,
             mon_max_trans_mm: f64::INFINITY,
             mon_max_rot_deg: f64::INFINITY,
+            poscorr: false,
             axiscorr: false,
             axis_lower_deg: [f64::NEG_INFINITY; 6],
             axis_upper_deg: [f64::INFINITY; 6],
@@ -176,6 +178,7 @@ impl ContextConfig {
             if name == b"RSIObject" {
                 obj = attr(attrs, b"ObjType").map_err(xml)?.unwrap_or(b"").to_ascii_uppercase();
                 seen_ethernet |= obj == b"ETHERNET";
+                c.poscorr |= obj == b"POSCORR";
                 c.axiscorr |= obj == b"AXISCORR";
                 continue;
             }
@@ -244,7 +247,7 @@ impl ContextConfig {
     pub fn check_feeds(&self, e: &EthernetConfig) -> Result<(), RsiFileError> {
         match e.correction() {
             Correction::Axis if !self.axiscorr => Err(RsiFileError::Mismatch { received: "AKorr", object: "AXISCORR" }),
-            Correction::Cartesian if self.axiscorr && !self.lower_mm[0].is_finite() => {
+            Correction::Cartesian if !self.poscorr => {
                 Err(RsiFileError::Mismatch { received: "RKorr", object: "POSCORR" })
             }
             _ => Ok(()),
@@ -277,7 +280,7 @@ mod tests {
         assert!(src.contains("RSI_ON(#ABSOLUTE, #IPO_FAST)"));
         assert!(src.contains("PTP {X 350.0, Y 0.0, Z 450.0, A 180.0, B 0.0, C 0.0}"));
         assert_eq!(e.correction(), Correction::Cartesian);
-        assert!(!c.axiscorr);
+        assert!(c.poscorr && !c.axiscorr);
         c.check_feeds(&e).unwrap();
     }
 
@@ -290,7 +293,7 @@ mod tests {
         assert_eq!((e.ip, e.port, &e.sentype, &e.send), (cart.ip, cart.port, &cart.sentype, &cart.send));
         let c = ContextConfig::parse(AXIS_CONTEXT_XML).unwrap();
         assert_eq!(c.config_file, "topspin_axis_ethernet.xml");
-        assert!(c.axiscorr);
+        assert!(c.axiscorr && !c.poscorr);
         c.check_feeds(&e).unwrap();
         assert_eq!(c.axis_lower_deg, [-90.0, -60.0, -100.0, -150.0, -66.0, -180.0]);
         assert_eq!(c.axis_upper_deg, [90.0, 90.0, 30.0, 150.0, 45.0, 180.0]);
