@@ -298,12 +298,13 @@ fn axis_correction_lands_the_strokes_as_the_cartesian_one() {
         assert!(a.rot_deg < 0.5, "strike {}: orientation off by {:.3}°", plan.trajectory, a.rot_deg);
         worst = worst.max((a.at_hit_mm - c.at_hit_mm).abs());
     }
-    assert!(worst < 0.05, "axis vs Cartesian at the hit time: {worst:.4} mm");
+    assert!(worst < 0.01, "axis vs Cartesian at the hit time: {worst:.4} mm");
     // And the whole path, cycle by cycle.
     let dev =
         r.path.iter().zip(&rc.path).map(|(a, c)| (0..3).map(|i| (a.actual[i] - c.actual[i]).abs()).fold(0.0, f64::max));
     let dev = dev.fold(0.0f64, f64::max);
-    assert!(dev < 0.05, "axis vs Cartesian path: {dev:.4} mm");
+    eprintln!("axis vs Cartesian: {worst:.4} mm at the hit times, {dev:.4} mm along the path");
+    assert!(dev < 0.01, "axis vs Cartesian path: {dev:.4} mm");
 }
 
 #[test]
