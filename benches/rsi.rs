@@ -1,25 +1,30 @@
-//! RSI per-cycle cost: parse + plan + emit (DESIGN §9: answer p99.9 < 100 µs).
+//! RSI per-cycle cost: parse + plan + emit (DESIGN §9: answer p99.9 < 100 µs),
+//! with the Cartesian correction (RKorr) and the axis correction (AKorr: our
+//! inverse kinematics each cycle) side by side.
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use std::hint::black_box;
 use topspin_core::calib::Calibration;
+use topspin_core::motion::MotionLimits;
 use topspin_core::physics::Vec3;
 use topspin_core::plan::{EulerZyx, StrikePlan};
 use topspin_core::rsi::codec::{KukaPose, RobElement, RobFrame, SenFrame};
-use topspin_core::rsi::session::{MAX_ANSWER_LEN, RsiSession, SessionConfig};
+use topspin_core::rsi::session::{Correction, MAX_ANSWER_LEN, RsiSession, SessionConfig};
 use topspin_core::time::Instant;
 
-fn request(ipoc: u64, buf: &mut [u8]) -> usize {
+/// A request at home; `q`: the home joints (AIPos, ASPos), degrees.
+fn request(ipoc: u64, q: [f64; 6], buf: &mut [u8]) -> usize {
     let home = KukaPose::from_array([350.0, 0.0, 450.0, 180.0, 0.0, 0.0]);
     let all = [RobElement::RIst, RobElement::RSol, RobElement::AIPos, RobElement::ASPos, RobElement::Delay];
-    RobFrame { ipoc, rist: Some(home), rsol: Some(home), aipos: Some([0.0; 6]), aspos: Some([0.0; 6]), delay: Some(0) }
+    RobFrame { ipoc, rist: Some(home), rsol: Some(home), aipos: Some(q), aspos: Some(q), delay: Some(0) }
         .emit(&all, 4, buf)
         .unwrap()
 }
 
 fn bench(c: &mut Criterion) {
     let mut req = [0u8; 1024];
-    let n = request(4208831, &mut req);
+    let q = MotionLimits::from_robot(&Calibration::default_cell().robot).home_joints.degrees();
+    let n = request(4208831, q, &mut req);
     let mut out = [0u8; MAX_ANSWER_LEN];
     c.bench_function("rsi/parse_rob", |b| b.iter(|| RobFrame::parse(black_box(&req[..n])).unwrap()));
     c.bench_function("rsi/emit_sen", |b| {
@@ -28,6 +33,7 @@ fn bench(c: &mut Criterion) {
                 sentype: "ImFree",
                 estr: None,
                 rkorr: Some(KukaPose::from_array([12.3, -3.2, 40.0, 0.0, 28.0, 0.0])),
+                akorr: None,
                 ipoc: 4208831,
             }
             .emit(4, black_box(&mut out))
@@ -35,7 +41,22 @@ fn bench(c: &mut Criterion) {
         })
     });
     let cal = Calibration::default_cell();
-    let mk = || RsiSession::new(SessionConfig::from_calibration(&cal, "ImFree")).unwrap();
+    for correction in Correction::ALL {
+        cycles(c, &cal, correction, q, &mut req, &mut out);
+    }
+}
+
+/// `rsi/cycle_*` (Cartesian) or `rsi/axis_cycle_*` (axis).
+fn cycles(c: &mut Criterion, cal: &Calibration, correction: Correction, q: [f64; 6], req: &mut [u8], out: &mut [u8]) {
+    let prefix = match correction {
+        Correction::Cartesian => "rsi/cycle",
+        Correction::Axis => "rsi/axis_cycle",
+    };
+    let mk = || {
+        let mut cfg = SessionConfig::from_calibration(cal, "ImFree");
+        cfg.correction = correction;
+        RsiSession::new(cfg).unwrap()
+    };
     let plan = |seq: u32, now: Instant, hit: Instant| StrikePlan {
         seq,
         trajectory: 1,
@@ -50,28 +71,29 @@ fn bench(c: &mut Criterion) {
     // Cycle without a new plan (sampling the stroke).
     let mut s = mk();
     let mut k = 0u64;
-    c.bench_function("rsi/cycle_sample", |b| {
+    c.bench_function(&format!("{prefix}_sample"), |b| {
         b.iter(|| {
             k += 1;
             let now = Instant(1_000_000_000 + k * 4_000_000);
-            let n = request(100 + 4 * k, &mut req);
-            s.handle_datagram(now, &req[..n], &mut out).unwrap()
+            let n = request(100 + 4 * k, q, req);
+            s.handle_datagram(now, &req[..n], out).unwrap()
         })
     });
     // Cycle with a new plan every cycle (Ruckig re-plan each time); a new
     // stroke every 100 cycles so the hit stays ahead.
     let mut s = mk();
     let mut k = 0u64;
-    c.bench_function("rsi/cycle_replan", |b| {
+    c.bench_function(&format!("{prefix}_replan"), |b| {
         b.iter(|| {
             k += 1;
             let now = Instant(1_000_000_000 + k * 4_000_000);
             let hit = Instant(1_000_000_000 + ((k / 100) * 100 + 150) * 4_000_000);
             s.set_plan(plan(k as u32, now, hit));
-            let n = request(100 + 4 * k, &mut req);
-            s.handle_datagram(now, &req[..n], &mut out).unwrap()
+            let n = request(100 + 4 * k, q, req);
+            s.handle_datagram(now, &req[..n], out).unwrap()
         })
     });
+    assert_eq!(s.stats().axis_held, 0, "{correction}: every cycle sent");
 }
 
 criterion_group!(benches, bench);

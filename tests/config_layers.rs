@@ -119,6 +119,8 @@ fn bad_values_name_the_key() {
         ("TOPSPIN_TRACKER__NOISE_MM", "-2", "tracker.noise_mm"),
         ("TOPSPIN_TRACKER__FIXED_LATENCY_MS", "-1", "tracker.fixed_latency_ms"),
         ("TOPSPIN_RSI__SENTYPE", "a<b", "rsi.sentype"),
+        ("TOPSPIN_RSI__CORRECTION", "joint", "rsi.correction"),
+        ("TOPSPIN_RSI__CORRECTION", "Axis", "rsi.correction"),
         ("TOPSPIN_TELEMETRY__LOG_INTERVAL_S", "0", "telemetry.log_interval_s"),
         ("TOPSPIN_TELEMETRY__LOG_LEVEL", "loud", "telemetry.log_level"),
     ];
@@ -128,6 +130,10 @@ fn bad_values_name_the_key() {
     }
     let e = err(None, None, &[("TOPSPIN_NETWORK__RSI_BIND", "x")]);
     assert_eq!(e, "network.rsi_bind: \"x\" is not an address (IP:PORT)");
+    let e = err(None, None, &[("TOPSPIN_RSI__CORRECTION", "joint")]);
+    assert_eq!(e, "rsi.correction: \"joint\" is not \"cartesian\" or \"axis\"");
+    let axis = load(None, None, &[("TOPSPIN_RSI__CORRECTION", "axis")]).unwrap();
+    assert_eq!(axis.rsi.correction(), topspin_core::rsi::session::Correction::Axis);
 }
 
 #[test]

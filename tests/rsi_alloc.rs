@@ -1,11 +1,13 @@
 //! The per-cycle path (parse, plan, generate, filter, emit) allocates
-//! nothing after construction: a counting allocator proves it.
+//! nothing after construction, in both correction modes (axis: also our
+//! inverse kinematics per cycle): a counting allocator proves it.
 
 use topspin_core::calib::Calibration;
+use topspin_core::motion::MotionLimits;
 use topspin_core::physics::Vec3;
 use topspin_core::plan::{EulerZyx, StrikePlan};
 use topspin_core::rsi::codec::{KukaPose, RobElement, RobFrame};
-use topspin_core::rsi::session::{MAX_ANSWER_LEN, RsiSession, SessionConfig};
+use topspin_core::rsi::session::{Correction, MAX_ANSWER_LEN, RsiSession, SessionConfig};
 use topspin_core::time::Instant;
 
 #[path = "alloc_counter/mod.rs"]
@@ -16,8 +18,17 @@ static GLOBAL: alloc_counter::Counting = alloc_counter::Counting;
 
 #[test]
 fn the_cycle_path_does_not_allocate() {
+    for c in Correction::ALL {
+        cycles_do_not_allocate(c);
+    }
+}
+
+fn cycles_do_not_allocate(correction: Correction) {
     let cal = Calibration::default_cell();
-    let mut s = RsiSession::new(SessionConfig::from_calibration(&cal, "ImFree")).unwrap();
+    let mut cfg = SessionConfig::from_calibration(&cal, "ImFree");
+    cfg.correction = correction;
+    let mut s = RsiSession::new(cfg).unwrap();
+    let home_joints = MotionLimits::from_robot(&cal.robot).home_joints.degrees();
     let mut req = [0u8; 1024];
     let mut out = [0u8; MAX_ANSWER_LEN];
     let all = [RobElement::RIst, RobElement::RSol, RobElement::AIPos, RobElement::ASPos, RobElement::Delay];
@@ -40,8 +51,8 @@ fn the_cycle_path_does_not_allocate() {
             ipoc: 100 + 4 * k,
             rist: Some(home),
             rsol: Some(home),
-            aipos: Some([0.0; 6]),
-            aspos: Some([0.0; 6]),
+            aipos: Some(home_joints),
+            aspos: Some(home_joints),
             delay: Some(0),
         }
         .emit(&all, 4, &mut req)
@@ -55,10 +66,17 @@ fn the_cycle_path_does_not_allocate() {
     for k in 0..5 {
         cycle(k, &mut s);
     }
+    let mut moved = 0.0f64;
     let ((), allocations) = alloc_counter::count_on_this_thread(|| {
         for k in 5..400 {
             cycle(k, &mut s);
+            moved = s.last_axis_correction().iter().fold(moved, |m, a| m.max(a.abs()));
         }
     });
-    assert_eq!(allocations, 0, "allocations or reallocations in 395 cycles");
+    assert_eq!(allocations, 0, "{correction}: allocations or reallocations in 395 cycles");
+    assert_eq!(s.stats().answers, 400);
+    if correction == Correction::Axis {
+        assert_eq!(s.stats().axis_held, 0);
+        assert!(moved > 1.0, "the stroke moved the axes ({moved}°)");
+    }
 }

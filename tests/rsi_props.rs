@@ -24,12 +24,22 @@ proptest! {
     #[test]
     fn sen_emit_then_parse(k in pose(), ipoc in any::<u64>(), prec in 0u8..=6) {
         let mut buf = [0u8; 1024];
-        let n = SenFrame { sentype: "ImFree", estr: Some("x"), rkorr: Some(KukaPose::from_array(k)), ipoc }
+        let n = SenFrame { sentype: "ImFree", estr: Some("x"), rkorr: Some(KukaPose::from_array(k)), akorr: None, ipoc }
             .emit(prec, &mut buf).unwrap();
         let v = SenFrame::parse(&buf[..n]).unwrap();
         prop_assert_eq!(v.ipoc, ipoc);
         prop_assert_eq!(v.sentype, b"ImFree");
+        prop_assert_eq!(v.akorr, None);
         let back = v.rkorr.unwrap().to_array();
+        for i in 0..6 {
+            prop_assert!((back[i] - k[i]).abs() <= 0.5 * 10f64.powi(-(prec as i32)) + 1e-9 * k[i].abs());
+        }
+        // The same numbers as an axis correction (AKorr A1..A6, degrees).
+        let n = SenFrame { sentype: "ImFree", estr: None, rkorr: None, akorr: Some(k), ipoc }
+            .emit(prec, &mut buf).unwrap();
+        let v = SenFrame::parse(&buf[..n]).unwrap();
+        prop_assert_eq!((v.ipoc, v.rkorr), (ipoc, None));
+        let back = v.akorr.unwrap();
         for i in 0..6 {
             prop_assert!((back[i] - k[i]).abs() <= 0.5 * 10f64.powi(-(prec as i32)) + 1e-9 * k[i].abs());
         }

@@ -17,7 +17,7 @@ fuzz_target!(|data: &[u8]| {
     if check_text(sentype).is_err() || estr.is_some_and(|e| check_text(e).is_err()) {
         return;
     }
-    let frame = SenFrame { sentype, estr, rkorr: v.rkorr, ipoc: v.ipoc };
+    let frame = SenFrame { sentype, estr, rkorr: v.rkorr, akorr: v.akorr, ipoc: v.ipoc };
     let mut buf = [0u8; 1024];
     if let Ok(n) = frame.emit(4, &mut buf) {
         let back = SenFrame::parse(&buf[..n]).expect("an emitted <Sen> parses");

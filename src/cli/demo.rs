@@ -18,6 +18,11 @@ pub struct DemoArgs {
     /// compensation is worth.
     #[arg(long)]
     pub no_lag_comp: bool,
+    /// The correction the daemon sends and the mock KR C4's RSI context
+    /// takes: `cartesian` (RKorr, POSCORR) or `axis` (AKorr from topspin's
+    /// inverse kinematics, AXISCORR).
+    #[arg(long, default_value = "cartesian", value_parser = super::mock_krc::parse_correction)]
+    pub correction: topspin_core::rsi::session::Correction,
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
     /// Tracker noise per axis, mm.
@@ -80,6 +85,7 @@ pub fn run(a: DemoArgs) -> anyhow::Result<()> {
     let cal = Calibration::default_cell();
     let mut runtime = topspin_daemon::runtime::daemon::RuntimeConfig::loopback();
     runtime.servo_compensation = !a.no_lag_comp;
+    runtime.correction = a.correction;
     if let Some(method) = a.logo {
         runtime.logo = Some(topspin_daemon::runtime::daemon::LogoRuntime {
             bind: "127.0.0.1:0".parse().expect("literal"),
@@ -246,15 +252,18 @@ pub fn table(r: &DemoReport) -> String {
     let rb = &r.robot;
     let _ = writeln!(
         out,
-        "robot: dead time {:.0} ms, lag {:.0} ms, compensation {}; axes peaked at {:.0} % of their speed, {:.0} % of \
-         their acceleration ({} cycles over a limit); {} POSCORR clamps; stopped: {}",
+        "robot: dead time {:.0} ms, lag {:.0} ms, compensation {}, {} correction; axes peaked at {:.0} % of their \
+         speed, {:.0} % of their acceleration ({} cycles over a limit); {} POSCORR clamps, {} AXISCORR clamps; \
+         stopped: {}",
         rb.dead_time_ms,
         rb.lag_ms,
         if rb.compensation { "on" } else { "off" },
+        rb.correction,
         rb.peak_speed_share * 100.0,
         rb.peak_acceleration_share * 100.0,
         rb.rates_over,
         r.poscorr_clamped,
+        rb.axiscorr_clamped,
         rb.stop_reason.as_deref().unwrap_or("no"),
     );
     if !rb.skipped.is_empty() {

@@ -9,8 +9,9 @@ use clap::Args;
 
 use super::BadInput;
 use topspin_core::calib::Calibration;
+use topspin_core::rsi::session::Correction;
 use topspin_core::time::Duration;
-use topspin_sim::mock_krc::config::{ContextConfig, DEFAULT_CONTEXT_XML, DEFAULT_ETHERNET_XML, EthernetConfig};
+use topspin_sim::mock_krc::config::{ContextConfig, EthernetConfig, rsi_files};
 use topspin_sim::mock_krc::{CorrMode, Faults, MockKrcConfig};
 
 #[derive(Debug, Args)]
@@ -21,10 +22,20 @@ pub struct MockKrcArgs {
     /// The sensor's address (default: IP_NUMBER:PORT of the Ethernet XML).
     #[arg(long)]
     pub to: Option<SocketAddr>,
-    /// Folder with topspin_ethernet.xml and topspin.rsi.xml (default: the
-    /// compiled-in rsi/).
+    /// Folder with topspin_ethernet.xml and topspin.rsi.xml (with
+    /// --correction axis: topspin_axis_ethernet.xml and
+    /// topspin_axis.rsi.xml); default: the compiled-in rsi/.
     #[arg(long)]
     pub rsi_dir: Option<PathBuf>,
+    /// The RSI context the controller runs: `cartesian` (RKorr into
+    /// POSCORR) or `axis` (AKorr into AXISCORR, AXISCORRMON). An answer
+    /// with the other correction is held (HOLDON) and counted
+    /// (`wrong_kind`).
+    #[arg(long, default_value = "cartesian", value_parser = parse_correction)]
+    pub correction: Correction,
+    /// One JSON object with the run's counters instead of the line.
+    #[arg(long)]
+    pub json: bool,
     /// Calibration folder (robot.toml: home, limits).
     #[arg(long)]
     pub calib: Option<PathBuf>,
@@ -67,6 +78,10 @@ pub struct MockKrcArgs {
     pub csv: Option<PathBuf>,
 }
 
+pub(crate) fn parse_correction(s: &str) -> Result<Correction, String> {
+    s.parse().map_err(|e| format!("{s:?}: {e}"))
+}
+
 fn read(dir: &Option<PathBuf>, name: &str, default: &str) -> anyhow::Result<String> {
     match dir {
         Some(d) => std::fs::read_to_string(d.join(name))
@@ -77,10 +92,17 @@ fn read(dir: &Option<PathBuf>, name: &str, default: &str) -> anyhow::Result<Stri
 
 pub fn run(a: MockKrcArgs) -> anyhow::Result<()> {
     let calib = Calibration::load(a.calib.as_deref()).map_err(|e| BadInput(e.to_string()))?;
-    let eth = EthernetConfig::parse(&read(&a.rsi_dir, "topspin_ethernet.xml", DEFAULT_ETHERNET_XML)?)
-        .map_err(|e| BadInput(e.to_string()))?;
-    let ctx = ContextConfig::parse(&read(&a.rsi_dir, "topspin.rsi.xml", DEFAULT_CONTEXT_XML)?)
-        .map_err(|e| BadInput(e.to_string()))?;
+    let [(eth_name, eth_text), (ctx_name, ctx_text)] = rsi_files(a.correction);
+    let eth = EthernetConfig::parse(&read(&a.rsi_dir, eth_name, eth_text)?)
+        .map_err(|e| BadInput(format!("{eth_name}: {e}")))?;
+    let ctx = ContextConfig::parse(&read(&a.rsi_dir, ctx_name, ctx_text)?)
+        .map_err(|e| BadInput(format!("{ctx_name}: {e}")))?;
+    ctx.check_feeds(&eth).map_err(|e| BadInput(format!("{ctx_name}: {e}")))?;
+    if eth.correction() != a.correction {
+        return Err(
+            BadInput(format!("{eth_name}: receives {}, not --correction {}", eth.correction(), a.correction)).into()
+        );
+    }
     if a.cycle_ms != 4 && a.cycle_ms != 12 {
         return Err(BadInput("--cycle-ms must be 4 or 12".into()).into());
     }
@@ -117,27 +139,51 @@ pub fn run(a: MockKrcArgs) -> anyhow::Result<()> {
         reorder: a.reorder,
     };
     eprintln!(
-        "mock-krc: sending <Rob> every {} ms to {} ({:?}, SENTYPE {})",
-        a.cycle_ms, cfg.sensor, a.mode, eth.sentype
+        "mock-krc: sending <Rob> every {} ms to {} ({:?}, {} correction, SENTYPE {})",
+        a.cycle_ms, cfg.sensor, a.mode, a.correction, eth.sentype
     );
     let stop = AtomicBool::new(false);
     let r = topspin_sim::mock_krc::run(&cfg, &stop).context("mock KR C4")?;
+    if let Some(p) = &a.csv {
+        r.write_csv(p).with_context(|| format!("writing {}", p.display()))?;
+    }
+    if a.json {
+        let v = serde_json::json!({
+            "correction": a.correction.key(),
+            "cycles": r.cycles,
+            "late": r.late,
+            "wrong_ipoc": r.wrong_ipoc,
+            "wrong_type": r.wrong_type,
+            "wrong_kind": r.wrong_kind,
+            "malformed": r.malformed,
+            "poscorr_clamped": r.poscorr_clamped,
+            "axiscorr_clamped": r.axiscorr_clamped,
+            "akorr_range_deg": r.akorr_range_deg,
+            "max_answer_delay_us": r.max_answer_delay.0 / 1000,
+            "peak_speed_share": r.peak_speed_share,
+            "peak_acceleration_share": r.peak_acceleration_share,
+            "rates_over": r.rates_over,
+            "stopped": r.stopped.map(|s| s.key()),
+            "stop_reason": r.stopped.map(|s| s.to_string()),
+        });
+        println!("{v}");
+        return Ok(());
+    }
     println!(
-        "cycles {} late {} stopped_by_limit {} stopped_by_monitor {} wrong_ipoc {} poscorr_clamped {} max_answer_delay_us {} \
-         peak_axis_speed {:.0}% peak_axis_acceleration {:.0}% stopped: {}",
+        "cycles {} late {} stopped_by_limit {} stopped_by_monitor {} wrong_ipoc {} wrong_kind {} poscorr_clamped {} \
+         axiscorr_clamped {} max_answer_delay_us {} peak_axis_speed {:.0}% peak_axis_acceleration {:.0}% stopped: {}",
         r.cycles,
         r.late,
         r.stopped_by_limit,
         r.stopped_by_monitor,
         r.wrong_ipoc,
+        r.wrong_kind,
         r.poscorr_clamped,
+        r.axiscorr_clamped,
         r.max_answer_delay.0 / 1000,
         r.peak_speed_share * 100.0,
         r.peak_acceleration_share * 100.0,
         r.stopped.map_or("no".to_owned(), |s| s.to_string()),
     );
-    if let Some(p) = a.csv {
-        r.write_csv(&p).with_context(|| format!("writing {}", p.display()))?;
-    }
     Ok(())
 }

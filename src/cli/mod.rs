@@ -49,6 +49,9 @@ pub enum Command {
     /// live UDP stream.
     Sim(sim::SimArgs),
     /// Everything on loopback: simulated tracker, daemon, mock KR C4; judges every stroke.
+    ///
+    /// Example: `topspin demo --balls 27 --correction axis --json` (axis
+    /// correction: AKorr from topspin's inverse kinematics).
     Demo(demo::DemoArgs),
     /// Spin and prediction for one recorded trajectory (CSV t,x,y,z).
     Fit(fit::FitArgs),
@@ -59,6 +62,9 @@ pub enum Command {
     #[command(subcommand)]
     Eval(eval::EvalCommand),
     /// The mock KR C4: an RSI client sending <Rob> every 4 ms (12 ms).
+    ///
+    /// Example: `topspin mock-krc --correction axis --cycles 2500 --json`
+    /// (the axis context: AKorr into AXISCORR; default RKorr into POSCORR).
     MockKrc(mock_krc::MockKrcArgs),
     /// Labelled synthetic ceiling-camera crops of simulated balls: PNG +
     /// labels, and/or a live TTI1 stream.

@@ -66,6 +66,7 @@ pub fn runtime_config(c: &DaemonConfig) -> Result<RuntimeConfig, BadInput> {
         record_rsi: c.recording.enabled,
         logo: logo_runtime(c)?,
         servo_compensation: c.rsi.servo_compensation,
+        correction: c.rsi.correction(),
     })
 }
 

@@ -182,10 +182,25 @@ pub struct RsiConfig {
     /// `[servo]`): command ahead, feed the lag forward.
     #[serde(default = "yes")]
     pub servo_compensation: bool,
+    /// `cartesian` (RKorr, POSCORR) or `axis` (AKorr, AXISCORR): as the
+    /// controller's RSI context is built (`rsi/README.md`).
+    #[serde(default = "cartesian")]
+    pub correction: String,
+}
+
+impl RsiConfig {
+    /// The correction (`correction`, validated by [`DaemonConfig::validate`]).
+    pub fn correction(&self) -> topspin_core::rsi::session::Correction {
+        self.correction.parse().unwrap_or_default()
+    }
 }
 
 fn yes() -> bool {
     true
+}
+
+fn cartesian() -> String {
+    "cartesian".to_owned()
 }
 
 /// `[telemetry]`: logs and counters.
@@ -309,7 +324,7 @@ impl Default for DaemonConfig {
                 rsi_wait: RsiWait::Blocking,
             },
             tracker: TrackerConfig { noise_mm: 2.0, fixed_latency_ms: 2.0 },
-            rsi: RsiConfig { sentype: "ImFree".to_owned(), servo_compensation: true },
+            rsi: RsiConfig { sentype: "ImFree".to_owned(), servo_compensation: true, correction: cartesian() },
             telemetry: TelemetryConfig { log_interval_s: 10.0, log_level: "info".to_owned() },
             recording: RecordingConfig { enabled: false, dir: PathBuf::from("/var/lib/topspin") },
             viewer: ViewerConfig::default(),
@@ -444,6 +459,12 @@ impl DaemonConfig {
         let s = &self.rsi.sentype;
         if s.is_empty() || s.len() > 64 || !s.bytes().all(|b| b.is_ascii_alphanumeric() || b == b'_' || b == b'-') {
             return Err(invalid("rsi.sentype", format!("{s:?} is not a SENTYPE (1 to 64 of A-Z a-z 0-9 _ -)")));
+        }
+        if self.rsi.correction.parse::<topspin_core::rsi::session::Correction>().is_err() {
+            return Err(invalid(
+                "rsi.correction",
+                format!("{:?} is not \"cartesian\" or \"axis\"", self.rsi.correction),
+            ));
         }
         let te = &self.telemetry;
         if !(te.log_interval_s.is_finite() && te.log_interval_s > 0.0) {

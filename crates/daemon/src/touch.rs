@@ -158,7 +158,13 @@ type Shared = (Arc<AtomicBool>, Arc<AtomicUsize>, Arc<AtomicBool>, Arc<AtomicU64
 /// not a `<Rob>`.
 fn answer(socket: &UdpSocket, sentype: &str, rx: &[u8], from: SocketAddr) -> io::Result<Option<Sample>> {
     let Ok(rob) = RobFrame::parse(rx) else { return Ok(None) };
-    let sen = SenFrame { sentype, estr: Some("topspin calibrate"), rkorr: Some(KukaPose::default()), ipoc: rob.ipoc };
+    let sen = SenFrame {
+        sentype,
+        estr: Some("topspin calibrate"),
+        rkorr: Some(KukaPose::default()),
+        akorr: None,
+        ipoc: rob.ipoc,
+    };
     let mut tx = [0u8; 512];
     if let Ok(len) = sen.emit(PRECISION, &mut tx) {
         match socket.send_to(&tx[..len], from) {

@@ -174,6 +174,12 @@ pub struct RobotReport {
     pub lag_ms: f64,
     /// The daemon compensated them.
     pub compensation: bool,
+    /// The correction sent (`cartesian`: RKorr, `axis`: AKorr) and the
+    /// cycles AXISCORR clamped (axis).
+    pub correction: &'static str,
+    pub axiscorr_clamped: u64,
+    /// The smallest and largest AKorr per axis A1..A6, degrees (axis).
+    pub akorr_range_deg: [[f64; 2]; 6],
     /// Controller stops (0 or 1: RSI ends with the first) and why.
     pub stops: u64,
     pub stop_reason: Option<String>,
@@ -209,7 +215,7 @@ pub struct LoopbackRun {
 /// Runs the demo end to end and judges every stroke.
 pub fn run(cfg: &DemoConfig, cal: &Calibration) -> std::io::Result<DemoReport> {
     let r = run_loopback(cfg, cal)?;
-    let mut report = judge(cal, cfg.runtime.servo_compensation, &r.balls, &r.starts, r.t0, &r.mock, &r.daemon);
+    let mut report = judge(cal, &cfg.runtime, &r.balls, &r.starts, r.t0, &r.mock, &r.daemon);
     report.tracker_faults = r.injected;
     Ok(report)
 }
@@ -236,7 +242,8 @@ pub fn run_loopback(cfg: &DemoConfig, cal: &Calibration) -> std::io::Result<Loop
     let truth = topspin_daemon::viewer::DemoTruth::default();
     let sink = viewer_sink(cfg, &mut rcfg, cal, &truth)?;
     let daemon = Daemon::start(&rcfg, cal, sink)?;
-    let mut mcfg = MockKrcConfig::default_cell().map_err(|e| std::io::Error::other(e.to_string()))?;
+    let mut mcfg =
+        MockKrcConfig::default_cell_for(cfg.runtime.correction).map_err(|e| std::io::Error::other(e.to_string()))?;
     mcfg.sensor = daemon.rsi_addr;
     mcfg.bind = "127.0.0.1:0".parse().expect("literal");
     mcfg.cycles = None;
@@ -396,7 +403,7 @@ fn matching_plan(plans: &[StrikePlan], t_hit: Instant) -> Option<&StrikePlan> {
 
 fn judge(
     cal: &Calibration,
-    compensation: bool,
+    runtime: &RuntimeConfig,
     balls: &[SimBall],
     starts: &[f64],
     t0: Instant,
@@ -435,7 +442,10 @@ fn judge(
         robot: RobotReport {
             dead_time_ms: cal.robot.servo.dead_time_ms,
             lag_ms: cal.robot.servo.lag_ms,
-            compensation,
+            compensation: runtime.servo_compensation,
+            correction: runtime.correction.key(),
+            axiscorr_clamped: mock.axiscorr_clamped,
+            akorr_range_deg: mock.akorr_range_deg,
             stops: mock.stopped.is_some() as u64,
             stop_reason: mock.stopped.map(|r| r.to_string()),
             skipped: summary.telemetry.skipped.clone(),

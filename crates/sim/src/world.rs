@@ -88,9 +88,11 @@ pub fn run_virtual(cfg: &DemoConfig, cal: &Calibration) -> VirtualRun {
     let dcfg = demo_daemon_config(cfg);
     let mut ingest = Ingest::new(cfg.runtime.tracker_source, dcfg.fixed_latency_ns());
     let mut estimator = Estimator::new(cal, EstimatorConfig::default().with_noise(dcfg.tracker_noise_m()));
-    let session = RsiSession::new(SessionConfig::from_calibration(cal, &cfg.runtime.sentype))
-        .expect("the calibration's session configuration is valid");
-    let mut controller = MockKrcConfig::default_cell().expect("the compiled-in rsi/ files parse").controller;
+    let mut session_cfg = SessionConfig::from_calibration(cal, &cfg.runtime.sentype);
+    session_cfg.correction = cfg.runtime.correction;
+    let session = RsiSession::new(session_cfg).expect("the calibration's session configuration is valid");
+    let mut controller =
+        MockKrcConfig::default_cell_for(cfg.runtime.correction).expect("the compiled-in rsi/ files parse").controller;
     if let Some(n) = cfg.late_limit {
         controller.late_limit = n;
     }

@@ -5,18 +5,22 @@
 //! sleeps. 10 000 cycles of strikes with every answer on time and the bat
 //! at each hitting pose at its hitting time; delayed, dropped, duplicated
 //! answers and reordered requests counted exactly; an RSI restart (also
-//! with the robot off home); 12 ms cycles, also under a 4 ms session.
+//! with the robot off home); 12 ms cycles, also under a 4 ms session. The
+//! axis correction (AKorr into AXISCORR) against the axis context: the
+//! strokes land as in Cartesian mode, within the joint limits; a controller
+//! stopped mid-stroke by AXISCORRMON is survived; a session sending the
+//! other correction is held, not obeyed.
 
 #![allow(clippy::needless_range_loop)] // parallel per-axis arrays
 
 use topspin_core::calib::Calibration;
 use topspin_core::motion::MotionLimits;
 use topspin_core::plan::StrikePlan;
-use topspin_core::rsi::session::{RsiSession, SessionConfig, SessionEvent};
+use topspin_core::rsi::session::{Correction, RsiSession, SessionConfig, SessionEvent};
 use topspin_core::time::{Duration, Instant};
 use topspin_sim::mock_krc::controller::ControllerConfig;
 use topspin_sim::mock_krc::pair::Pair;
-use topspin_sim::mock_krc::{Faults, MockKrcConfig, MockResult};
+use topspin_sim::mock_krc::{Faults, MockKrcConfig, MockResult, StopReason};
 use topspin_sim::strikes::{StrikeMiss, strike_stream};
 
 const T0: Instant = Instant(1_000_000_000);
@@ -230,4 +234,135 @@ fn cycle_changed_to_12_ms_under_a_4_ms_session_is_survived() {
     let st = p.session.stats();
     assert_eq!(st.answers, 80);
     assert_eq!(st.ipoc_gaps, 79, "every step after the first");
+}
+
+fn axis_pair(session_correction: Correction) -> Pair {
+    let mut cfg = SessionConfig::from_calibration(&Calibration::default_cell(), "ImFree");
+    cfg.correction = session_correction;
+    let c = MockKrcConfig::default_cell_for(Correction::Axis).unwrap().controller;
+    Pair::new(RsiSession::new(cfg).unwrap(), c, Faults::default(), 11, T0)
+}
+
+/// Runs the strike stream for `n` cycles; the committed plans.
+fn strikes(p: &mut Pair, n: u64) -> Vec<StrikePlan> {
+    let end = T0 + Duration::from_millis(n * 4);
+    let mut finals = Vec::new();
+    for r in strike_stream(4, T0, end) {
+        while p.now() < r.plan.made_at {
+            p.step().expect("RSI running");
+        }
+        p.publish(r.plan);
+        if r.committed {
+            finals.push(r.plan);
+        }
+    }
+    while p.now() < end {
+        p.step().expect("RSI running");
+    }
+    finals
+}
+
+#[test]
+fn axis_correction_lands_the_strokes_as_the_cartesian_one() {
+    let cal = Calibration::default_cell();
+    let lim = MotionLimits::from_robot(&cal.robot);
+    let n = 5_000u64;
+    let mut cart = pair(4, 4, Faults::default(), 100);
+    let cart_finals = strikes(&mut cart, n);
+    let mut axis = axis_pair(Correction::Axis);
+    let finals = strikes(&mut axis, n);
+    assert_eq!(finals, cart_finals);
+    assert_eq!(finals.len(), 19, "strikes");
+    let (rc, r) = (cart.result(), axis.result());
+    let st = *axis.session.stats();
+    assert_eq!(r.cycles, n);
+    assert_eq!((r.late, r.wrong_ipoc, r.wrong_type, r.wrong_kind, r.malformed), (0, 0, 0, 0, 0));
+    assert_eq!((st.requests, st.answers, st.plans_rejected, st.axis_held), (n, n, 0, 0));
+    assert_eq!(r.axiscorr_clamped, 0, "AXISCORR never had to clamp");
+    within_limits(&r);
+    path_within(&r, &lim, controller(4).start, 0.004);
+    // The joints stayed within the software limit switches, off the wrist
+    // singularity, every cycle.
+    for (k, s) in r.path.iter().enumerate() {
+        let q = topspin_core::kinematics::Joints::from_degrees(s.joints);
+        lim.arm.limits.check_position(&q).unwrap_or_else(|v| panic!("cycle {k}: {v}"));
+    }
+    // Each stroke lands where the Cartesian one does, to a few µm (the
+    // corrections differ only by their rounding to 4 decimals of mm or of
+    // a degree).
+    let mut worst = 0.0f64;
+    for plan in &finals {
+        let a = StrikeMiss::of(&r.path, plan, &lim);
+        let c = StrikeMiss::of(&rc.path, plan, &lim);
+        assert!(a.best_mm < 2.0, "strike {}: {:.3} mm from the hitting point within ±2 ms", plan.trajectory, a.best_mm);
+        assert!(a.rot_deg < 0.5, "strike {}: orientation off by {:.3}°", plan.trajectory, a.rot_deg);
+        worst = worst.max((a.at_hit_mm - c.at_hit_mm).abs());
+    }
+    assert!(worst < 0.01, "axis vs Cartesian at the hit time: {worst:.4} mm");
+    // And the whole path, cycle by cycle.
+    let dev =
+        r.path.iter().zip(&rc.path).map(|(a, c)| (0..3).map(|i| (a.actual[i] - c.actual[i]).abs()).fold(0.0, f64::max));
+    let dev = dev.fold(0.0f64, f64::max);
+    eprintln!("axis vs Cartesian: {worst:.4} mm at the hit times, {dev:.4} mm along the path");
+    assert!(dev < 0.01, "axis vs Cartesian path: {dev:.4} mm");
+}
+
+#[test]
+fn a_controller_stopped_mid_stroke_by_axiscorrmon_is_survived() {
+    // AXISCORRMON at 3° on every axis: the first stroke trips it.
+    let mut p = axis_pair(Correction::Axis);
+    let mut c = MockKrcConfig::default_cell_for(Correction::Axis).unwrap().controller;
+    c.axis_mon_max_deg = [3.0; 6];
+    p.restart(Duration::from_millis(0), c);
+    let end = T0 + Duration::from_millis(2_000);
+    for r in strike_stream(4, T0, end) {
+        while p.now() < r.plan.made_at {
+            if p.step().is_none() {
+                break;
+            }
+        }
+        p.publish(r.plan);
+    }
+    let r = p.result();
+    let Some(StopReason::AxisMonitor(axis)) = r.stopped else { panic!("not stopped by AXISCORRMON: {:?}", r.stopped) };
+    assert_eq!(r.stopped.unwrap().key(), format!("axis_monitor_{}", axis.to_string().to_lowercase()));
+    assert!(r.cycles > 100 && r.cycles < 500, "stopped mid-stroke at cycle {}", r.cycles);
+    assert_eq!(r.late, 0);
+    // The session notices the silence and carries on: a fresh RSI run is
+    // answered from the pose the robot stopped in, and brings it home.
+    let stopped_at = r.path.last().unwrap().actual;
+    let mut c = MockKrcConfig::default_cell_for(Correction::Axis).unwrap().controller;
+    c.first_ipoc = 10_000_000;
+    c.start = stopped_at;
+    c.start_joints = p.controller.joints();
+    p.restart(Duration::from_millis(500), c);
+    assert!(p.take_events().iter().any(|e| matches!(e, SessionEvent::RobotSilent)), "silence noticed");
+    assert_eq!(p.run(400), 400);
+    let second = p.result();
+    assert_eq!((second.late, second.axiscorr_clamped, second.rates_over), (0, 0, 0));
+    assert!(second.stopped.is_none(), "{:?}", second.stopped);
+    let home = controller(4).start;
+    let end = second.path.last().unwrap().actual;
+    assert!((0..3).all(|i| (end[i] - home[i]).abs() < 0.5), "ended at {end:?}, home {home:?}");
+    assert_eq!(p.session.stats().axis_held, 0);
+}
+
+#[test]
+fn the_wrong_kind_of_correction_is_held_not_obeyed() {
+    // A Cartesian session against the axis context: every answer on time,
+    // none carries AKorr, so the robot holds its start pose (HOLDON) and
+    // the controller counts each one.
+    let mut p = axis_pair(Correction::Cartesian);
+    let mut start = controller(4).start;
+    start[0] += 30.0; // off home: the session's RKorr would move it
+    let mut c = MockKrcConfig::default_cell_for(Correction::Axis).unwrap().controller;
+    c.start = start;
+    p.restart(Duration::from_millis(0), c);
+    assert_eq!(p.run(100), 100);
+    let r = p.result();
+    assert_eq!((r.late, r.wrong_kind, r.axiscorr_clamped), (0, 100, 0));
+    assert!(r.stopped.is_none());
+    let moved = r.path.iter().map(|s| (0..3).map(|i| (s.actual[i] - start[i]).abs()).fold(0.0, f64::max));
+    assert!(moved.fold(0.0f64, f64::max) < 1e-6, "the robot did not move");
+    assert_ne!(p.session.last_correction().x, 0.0, "the session did ask for a move");
 }

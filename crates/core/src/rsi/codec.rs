@@ -10,6 +10,10 @@
 //!
 //! Units are KUKA's: mm and degrees, A/B/C = rotations about Z/Y/X. The
 //! conversion from SI happens in [`crate::rsi::session`], nowhere else.
+//!
+//! A `<Sen>` carries one of two corrections, as the RSI context is built:
+//! `<RKorr X Y Z A B C>` (Cartesian, object POSCORR) or `<AKorr A1..A6>`
+//! (axis angles in degrees, object AXISCORR).
 
 use super::xml::{Attrs, Scanner, Token, XmlError, attr, trim};
 
@@ -49,7 +53,7 @@ impl KukaPose {
 }
 
 /// Axis angles A1..A6 in degrees.
-pub(crate) type Axes = [f64; 6];
+pub type Axes = [f64; 6];
 
 /// Why a datagram could not be parsed or emitted.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
@@ -291,6 +295,8 @@ pub struct SenFrame<'a> {
     pub estr: Option<&'a str>,
     /// Cartesian correction (mm, degrees); `None` leaves `<RKorr>` out.
     pub rkorr: Option<KukaPose>,
+    /// Axis correction A1..A6 (degrees); `None` leaves `<AKorr>` out.
+    pub akorr: Option<Axes>,
     /// The echoed IPOC.
     pub ipoc: u64,
 }
@@ -304,6 +310,8 @@ pub struct SenView<'a> {
     pub estr: Option<&'a [u8]>,
     /// The `<RKorr>` correction (mm, degrees), if present.
     pub rkorr: Option<KukaPose>,
+    /// The `<AKorr>` correction A1..A6 (degrees), if present.
+    pub akorr: Option<Axes>,
     /// The echoed IPOC.
     pub ipoc: u64,
 }
@@ -335,6 +343,9 @@ impl<'a> SenFrame<'a> {
         if let Some(k) = self.rkorr {
             w.element(b"RKorr", &POSE_ATTRS, &k.to_array())?;
         }
+        if let Some(a) = self.akorr {
+            w.element(b"AKorr", &AXIS_ATTRS, &a)?;
+        }
         w.put(b"<IPOC>")?;
         w.uint(self.ipoc as u128)?;
         w.put(b"</IPOC></Sen>")?;
@@ -346,12 +357,13 @@ impl<'a> SenFrame<'a> {
         let mut s = Scanner::new(bytes);
         let root = expect_root(&mut s, "Sen")?;
         let sentype = attr(root, b"Type")?.unwrap_or(b"");
-        let mut v = SenView { sentype, estr: None, rkorr: None, ipoc: 0 };
+        let mut v = SenView { sentype, estr: None, rkorr: None, akorr: None, ipoc: 0 };
         let mut ipoc = None;
         while let Some(t) = s.next_token() {
             match t? {
                 Token::Start { name, attrs, empty } => match name {
                     b"RKorr" => v.rkorr = Some(KukaPose::from_array(attrs_named(attrs, "RKorr", POSE_ATTRS)?)),
+                    b"AKorr" => v.akorr = Some(attrs_named(attrs, "AKorr", AXIS_ATTRS)?),
                     b"EStr" => v.estr = Some(text_of(&mut s, empty)?),
                     b"IPOC" => ipoc = Some(integer(text_of(&mut s, empty)?, "IPOC")?),
                     _ => {}
@@ -498,6 +510,7 @@ mod tests {
             sentype: "ImFree",
             estr: Some("topspin"),
             rkorr: Some(KukaPose::from_array([12.3456, -3.21, 40.0, 0.0, 28.0, -0.00001])),
+            akorr: None,
             ipoc: 4208831,
         };
         let n = s.emit(4, &mut buf).unwrap();
@@ -508,5 +521,62 @@ mod tests {
         assert_eq!(s.emit(4, &mut buf[..20]), Err(CodecError::BufferTooSmall));
         let bad = SenFrame { sentype: "a<b", ..s };
         assert_eq!(bad.emit(4, &mut buf), Err(CodecError::BadText));
+    }
+
+    #[test]
+    fn emits_and_parses_an_axis_correction() {
+        let mut buf = [0u8; 512];
+        let s = SenFrame {
+            sentype: "ImFree",
+            estr: None,
+            rkorr: None,
+            akorr: Some([1.5, -90.0, 0.00004, -0.00005, 12.25, 359.9999]),
+            ipoc: 4208835,
+        };
+        let n = s.emit(4, &mut buf).unwrap();
+        assert_eq!(
+            &buf[..n],
+            &br#"<Sen Type="ImFree"><AKorr A1="1.5000" A2="-90.0000" A3="0.0000" A4="-0.0001" A5="12.2500" A6="359.9999"/><IPOC>4208835</IPOC></Sen>"#[..]
+        );
+        let v = SenFrame::parse(&buf[..n]).unwrap();
+        assert_eq!(v.akorr, Some([1.5, -90.0, 0.0, -0.0001, 12.25, 359.9999]));
+        assert_eq!((v.rkorr, v.ipoc, v.sentype), (None, 4208835, &b"ImFree"[..]));
+        // Any attribute order and case, white space; both corrections at once are both read.
+        let x = br#"<Sen Type="ImFree"> <AKorr a6="6" A5="5" A4="4" A3="3" A2="2" A1=" 1 " />
+<RKorr X="1" Y="2" Z="3" A="4" B="5" C="6"/><IPOC>9</IPOC></Sen>"#;
+        let v = SenFrame::parse(x).unwrap();
+        assert_eq!(v.akorr, Some([1.0, 2.0, 3.0, 4.0, 5.0, 6.0]));
+        assert_eq!(v.rkorr.map(KukaPose::to_array), Some([1.0, 2.0, 3.0, 4.0, 5.0, 6.0]));
+        // Out-of-range values are refused, never written.
+        let bad = SenFrame { akorr: Some([0.0, f64::NAN, 0.0, 0.0, 0.0, 0.0]), ..s };
+        assert_eq!(bad.emit(4, &mut buf), Err(CodecError::ValueOutOfRange));
+        let big = SenFrame { akorr: Some([2e9, 0.0, 0.0, 0.0, 0.0, 0.0]), ..s };
+        assert_eq!(big.emit(4, &mut buf), Err(CodecError::ValueOutOfRange));
+        assert_eq!(s.emit(4, &mut buf[..60]), Err(CodecError::BufferTooSmall));
+    }
+
+    #[test]
+    fn rejects_a_malformed_axis_correction() {
+        let parse = |x: &[u8]| SenFrame::parse(x).map(|v| v.akorr);
+        assert_eq!(
+            parse(br#"<Sen Type="T"><AKorr A1="0" A2="0" A3="0" A4="0" A5="0"/><IPOC>1</IPOC></Sen>"#),
+            Err(CodecError::MissingAttribute { element: "AKorr", attr: "A6" })
+        );
+        for bad in ["nan", "inf", "1e999", "", "1,5", "0x10", "--1"] {
+            let x =
+                format!(r#"<Sen Type="T"><AKorr A1="0" A2="{bad}" A3="0" A4="0" A5="0" A6="0"/><IPOC>1</IPOC></Sen>"#);
+            assert_eq!(parse(x.as_bytes()), Err(CodecError::BadNumber { element: "AKorr" }), "{bad}");
+        }
+        assert!(matches!(parse(br#"<Sen Type="T"><AKorr A1="0" A2=0/><IPOC>1</IPOC></Sen>"#), Err(CodecError::Xml(_))));
+        assert_eq!(
+            parse(br#"<Sen Type="T"><AKorr A1="0" A2="0" A3="0" A4="0" A5="0" A6="0"/></Sen>"#),
+            Err(CodecError::MissingIpoc)
+        );
+        assert_eq!(
+            parse(br#"<Sen Type="T"><AKorr A1="0" A2="0" A3="0" A4="0" A5="0" A6="0"/><IPOC>1</IPOC>"#),
+            Err(CodecError::Truncated { root: "Sen" })
+        );
+        // An element named like it is not it.
+        assert_eq!(parse(br#"<Sen Type="T"><AKorrX A1="x"/><IPOC>1</IPOC></Sen>"#), Ok(None));
     }
 }

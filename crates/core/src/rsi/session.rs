@@ -25,14 +25,24 @@
 //! controller's own clock; its offset to ours is the minimum of
 //! (arrival − IPOC) over a sliding window, so arrival jitter does not shake
 //! the path. Only #ABSOLUTE mode is produced.
+//!
+//! Two corrections, as the controller's RSI context is built
+//! ([`Correction`], `[rsi] correction`): Cartesian `<RKorr>` (POSCORR,
+//! BASE; the controller's own inverse kinematics turns it into joints) or
+//! axis `<AKorr>` (AXISCORR): the same fed-forward pose turned into joints
+//! by our inverse kinematics, nearest the joints last sent (the first:
+//! `AIPos` at RSI start), sent as those joints minus the joints at RSI
+//! start, in degrees. A pose with no solution within the software limit
+//! switches (or on the singular wrist) is never sent: the last correction
+//! holds, counted (`axis_held`) and reported ([`SessionEvent::AxisHeld`]).
 
 #![allow(clippy::needless_range_loop)] // parallel per-axis arrays
 
 use heapless::Deque;
 
-use super::codec::{CodecError, KukaPose, RobFrame, SenFrame, check_text};
+use super::codec::{Axes, CodecError, KukaPose, RobFrame, SenFrame, check_text};
 use crate::calib::Calibration;
-use crate::kinematics::Joints;
+use crate::kinematics::{Joints, Pose, Unreachable};
 use crate::motion::generator::Phase;
 use crate::motion::limits::unwrap_near;
 use crate::motion::{MotionLimits, PlanRejected, Pose6, SafetyFilter, StrokeGenerator};
@@ -45,6 +55,51 @@ pub(crate) const EVENT_CAPACITY: usize = 64;
 pub(crate) const CLOCK_WINDOW_CYCLES: u32 = 1024;
 /// The largest answer [`RsiSession::handle_datagram`] writes, bytes.
 pub const MAX_ANSWER_LEN: usize = 512;
+
+/// Which correction the session sends (`[rsi] correction`); it must match
+/// the controller's RSI context (`rsi/topspin.rsi.xml` for Cartesian,
+/// `rsi/topspin_axis.rsi.xml` for axis).
+#[derive(Copy, Clone, Debug, Default, PartialEq, Eq)]
+pub enum Correction {
+    /// `<RKorr X Y Z A B C>`: commanded TCP pose − pose at RSI start (mm,
+    /// degrees; POSCORR in BASE).
+    #[default]
+    Cartesian,
+    /// `<AKorr A1..A6>`: commanded joints (our inverse kinematics) − joints
+    /// at RSI start (degrees; AXISCORR).
+    Axis,
+}
+
+impl Correction {
+    /// Both, in the order of their keys.
+    pub const ALL: [Correction; 2] = [Correction::Cartesian, Correction::Axis];
+
+    /// The configuration's word: `cartesian` or `axis`.
+    pub fn key(self) -> &'static str {
+        match self {
+            Correction::Cartesian => "cartesian",
+            Correction::Axis => "axis",
+        }
+    }
+}
+
+impl core::fmt::Display for Correction {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(self.key())
+    }
+}
+
+impl core::str::FromStr for Correction {
+    type Err = UnknownCorrection;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        Correction::ALL.into_iter().find(|c| c.key() == s).ok_or(UnknownCorrection)
+    }
+}
+
+/// A correction name other than `cartesian` or `axis`.
+#[derive(Copy, Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("not \"cartesian\" or \"axis\"")]
+pub struct UnknownCorrection;
 
 /// How the session is set up.
 #[derive(Clone, Debug, PartialEq)]
@@ -70,6 +125,8 @@ pub struct SessionConfig {
     /// compensate it (command ahead of the dead time, feed the lag
     /// forward).
     pub servo: ServoCompensation,
+    /// Cartesian (`RKorr`) or axis (`AKorr`) correction.
+    pub correction: Correction,
 }
 
 /// The servo the session commands through.
@@ -112,6 +169,7 @@ impl SessionConfig {
                 lag_s: c.robot.servo.lag_s(),
                 enabled: true,
             },
+            correction: Correction::Cartesian,
         }
     }
 }
@@ -195,6 +253,15 @@ pub enum SessionEvent {
     RobotSilent,
     /// The stroke moved to another phase.
     PhaseChanged(Phase),
+    /// Axis mode: the commanded pose has no joint solution within the
+    /// software limits (first cycle of a run of them); the last axis
+    /// correction holds.
+    AxisHeld {
+        /// The IPOC of the first held cycle.
+        ipoc: u64,
+        /// Why there are no joints to send.
+        reason: Unreachable,
+    },
 }
 
 /// Counters since construction.
@@ -224,6 +291,9 @@ pub struct SessionStats {
     pub max_latency: Duration,
     /// Events dropped because the queue was full.
     pub events_dropped: u64,
+    /// Axis mode: cycles whose pose had no joints within the limits (the
+    /// last correction held).
+    pub axis_held: u64,
 }
 
 /// Why a datagram got no answer.
@@ -263,6 +333,12 @@ pub struct RsiSession {
     last_ipoc: u64,
     last_rx: Option<Instant>,
     last_correction: KukaPose,
+    /// Axis mode: the joints at RSI start, the joints last sent, and the
+    /// last AKorr (degrees).
+    start_joints: Joints,
+    last_sent_joints: Joints,
+    last_axis_correction: Axes,
+    holding: bool,
     last_command: Pose6,
     /// The generator's joints at the last setpoint (for the feed-forward).
     last_joints: Joints,
@@ -293,6 +369,7 @@ impl RsiSession {
             return Err(ConfigError::BadCycle);
         }
         let home = cfg.limits.home;
+        let home_joints = cfg.limits.home_joints;
         Ok(RsiSession {
             generator: StrokeGenerator::new(cfg.limits.clone(), Instant(0), home),
             safety: SafetyFilter::new(&cfg.limits, home),
@@ -302,6 +379,10 @@ impl RsiSession {
             last_ipoc: 0,
             last_rx: None,
             last_correction: KukaPose::default(),
+            start_joints: home_joints,
+            last_sent_joints: home_joints,
+            last_axis_correction: [0.0; 6],
+            holding: false,
             last_command: home,
             last_joints: Joints([0.0; 6]),
             last_joints_valid: false,
@@ -347,9 +428,26 @@ impl RsiSession {
         self.last_command
     }
 
-    /// The last RKorr sent (mm, degrees).
+    /// The last RKorr sent (mm, degrees; Cartesian mode).
     pub fn last_correction(&self) -> KukaPose {
         self.last_correction
+    }
+
+    /// The last AKorr sent (degrees; axis mode).
+    pub fn last_axis_correction(&self) -> Axes {
+        self.last_axis_correction
+    }
+
+    /// The joints at RSI start (rad): `AIPos` of the first request (axis
+    /// mode; else, or without `AIPos`, the solution for the start pose
+    /// nearest the calibrated home joints).
+    pub fn start_joints(&self) -> Joints {
+        self.start_joints
+    }
+
+    /// The joints last sent (rad; axis mode: start joints + AKorr).
+    pub fn last_sent_joints(&self) -> Joints {
+        self.last_sent_joints
     }
 
     /// The stroke generator (phase, target, lateness).
@@ -412,10 +510,12 @@ impl RsiSession {
             self.take_plan();
             self.step(t, rob.ipoc);
         }
+        let axis = self.cfg.correction == Correction::Axis;
         let answer = SenFrame {
             sentype: &self.cfg.sentype,
             estr: self.cfg.estr.as_deref(),
-            rkorr: Some(self.last_correction),
+            rkorr: (!axis).then_some(self.last_correction),
+            akorr: axis.then_some(self.last_axis_correction),
             ipoc: rob.ipoc,
         };
         let n = answer.emit(self.cfg.precision, out).map_err(SessionError::Emit)?;
@@ -469,6 +569,15 @@ impl RsiSession {
         let t_start = Instant(t.0.saturating_sub(self.cfg.cycle_ms as u64 * 1_000_000));
         self.generator.reset(t_start, self.start);
         self.safety.reset(self.start);
+        let arm = &self.cfg.limits.arm;
+        let near = self.cfg.limits.home_joints;
+        self.start_joints = match rob.aipos {
+            Some(a) if a.iter().all(|x| x.is_finite()) => Joints::from_degrees(a),
+            _ => arm.inverse_near(&Pose::from_pose6(&self.start), &near).unwrap_or(near),
+        };
+        self.last_sent_joints = self.start_joints;
+        self.last_axis_correction = [0.0; 6];
+        self.holding = false;
         self.last_correction = KukaPose::default();
         self.last_command = self.start;
         self.last_joints_valid = false;
@@ -551,6 +660,14 @@ impl RsiSession {
         };
         self.last_joints = q;
         self.last_joints_valid = !changed;
+        match self.cfg.correction {
+            Correction::Cartesian => self.cartesian_correction(&sent, &cmd),
+            Correction::Axis => self.axis_correction(&sent, &cmd, ipoc),
+        }
+    }
+
+    /// RKorr: `sent` − the start pose, mm and degrees (angles within ±180°).
+    fn cartesian_correction(&mut self, sent: &Pose6, cmd: &Pose6) {
         let mut k = [0.0; 6];
         for i in 0..3 {
             k[i] = (sent[i] - self.start[i]) * 1e3;
@@ -561,7 +678,226 @@ impl RsiSession {
         }
         if k.iter().all(|x| x.is_finite()) {
             self.last_correction = KukaPose::from_array(k);
-            self.last_command = cmd;
+            self.last_command = *cmd;
         }
+    }
+
+    /// AKorr: the joints of `sent` nearest the joints last sent, within the
+    /// software limits and off the singular wrist, − the start joints, in
+    /// degrees; else the last AKorr holds (counted, reported).
+    fn axis_correction(&mut self, sent: &Pose6, cmd: &Pose6, ipoc: u64) {
+        let arm = &self.cfg.limits.arm;
+        let joints = arm
+            .inverse_near(&Pose::from_pose6(sent), &self.last_sent_joints)
+            .and_then(|q| arm.limits.check_position(&q).map(|()| q).map_err(Unreachable::Limit));
+        let start = self.start_joints;
+        let sendable = joints.and_then(|q| {
+            let a: Axes = core::array::from_fn(|i| (q.0[i] - start.0[i]).to_degrees());
+            if a.iter().all(|x| x.is_finite()) { Ok((q, a)) } else { Err(Unreachable::OutOfReach) }
+        });
+        match sendable {
+            Ok((q, a)) => {
+                self.last_sent_joints = q;
+                self.last_axis_correction = a;
+                self.last_command = *cmd;
+                self.holding = false;
+            }
+            Err(reason) => {
+                self.stats.axis_held += 1;
+                if !self.holding {
+                    self.push(SessionEvent::AxisHeld { ipoc, reason });
+                }
+                self.holding = true;
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::kinematics::{Axis, LimitKind};
+    use crate::physics::Vec3;
+    use crate::plan::EulerZyx;
+    use crate::rsi::codec::{RobElement, SenView};
+
+    const T0: u64 = 1_000_000_000;
+    const CYCLE_NS: u64 = 4_000_000;
+
+    fn cal() -> Calibration {
+        Calibration::default_cell()
+    }
+
+    fn session(correction: Correction) -> RsiSession {
+        let mut cfg = SessionConfig::from_calibration(&cal(), "ImFree");
+        cfg.correction = correction;
+        RsiSession::new(cfg).unwrap()
+    }
+
+    /// The calibrated home pose in KUKA units and its joints in degrees.
+    fn home() -> (KukaPose, Axes) {
+        let lim = MotionLimits::from_robot(&cal().robot);
+        let h = lim.home;
+        let p = [h[0] * 1e3, h[1] * 1e3, h[2] * 1e3, h[3].to_degrees(), h[4].to_degrees(), h[5].to_degrees()];
+        (KukaPose::from_array(p), lim.home_joints.degrees())
+    }
+
+    /// Request k of a run (IPOC 100 + 4k at T0 + 4 ms·k), answered.
+    fn cycle(s: &mut RsiSession, k: u64, rist: KukaPose, aipos: Option<Axes>) -> (Option<KukaPose>, Option<Axes>) {
+        let mut req = [0u8; 1024];
+        let mut out = [0u8; MAX_ANSWER_LEN];
+        let elements = [RobElement::RIst, RobElement::AIPos, RobElement::Delay];
+        let rob = RobFrame { ipoc: 100 + 4 * k, rist: Some(rist), aipos, delay: Some(0), ..RobFrame::default() };
+        let n = rob.emit(&elements, 4, &mut req).unwrap();
+        let m = s.handle_datagram(Instant(T0 + k * CYCLE_NS), &req[..n], &mut out).unwrap();
+        let v: SenView = SenFrame::parse(&out[..m]).unwrap();
+        assert_eq!(v.ipoc, 100 + 4 * k);
+        (v.rkorr, v.akorr)
+    }
+
+    fn plan(seq: u32, k: u64) -> StrikePlan {
+        StrikePlan {
+            seq,
+            trajectory: 1,
+            made_at: Instant(T0 + k * CYCLE_NS),
+            hit_time: Instant(T0 + 100 * CYCLE_NS),
+            position: Vec3::new(1.6, 0.2, 0.3),
+            velocity: Vec3::new(-1.0, 0.0, 0.1),
+            orientation: EulerZyx { a: 0.1, b: 0.3, c: 0.0 },
+            spin: Vec3::zeros(),
+            confidence: 1.0,
+        }
+    }
+
+    #[test]
+    fn the_correction_names_parse_and_default_to_cartesian() {
+        assert_eq!("axis".parse(), Ok(Correction::Axis));
+        assert_eq!("cartesian".parse(), Ok(Correction::Cartesian));
+        assert_eq!("Axis".parse::<Correction>(), Err(UnknownCorrection));
+        assert_eq!("".parse::<Correction>(), Err(UnknownCorrection));
+        assert_eq!(Correction::Axis.to_string(), "axis");
+        assert_eq!(SessionConfig::from_calibration(&cal(), "ImFree").correction, Correction::Cartesian);
+    }
+
+    #[test]
+    fn each_mode_answers_its_own_correction_only() {
+        let (rist, aipos) = home();
+        let mut c = session(Correction::Cartesian);
+        let (r, a) = cycle(&mut c, 0, rist, Some(aipos));
+        assert_eq!((r, a), (Some(KukaPose::default()), None));
+        let mut s = session(Correction::Axis);
+        let (r, a) = cycle(&mut s, 0, rist, Some(aipos));
+        assert_eq!((r, a), (None, Some([0.0; 6])));
+        // At rest at home the joints sent are the start joints: AKorr stays zero.
+        for k in 1..50 {
+            assert_eq!(cycle(&mut s, k, rist, Some(aipos)), (None, Some([0.0; 6])), "cycle {k}");
+        }
+        assert_eq!(s.stats().axis_held, 0);
+    }
+
+    #[test]
+    fn the_start_joints_are_aipos_at_the_first_request() {
+        let (rist, aipos) = home();
+        // The controller's own joints, a little off our solution for RIst:
+        // the correction is from where the robot says it stands.
+        let mut off = aipos;
+        off[0] += 0.25;
+        off[5] -= 0.5;
+        let mut s = session(Correction::Axis);
+        let (_, a) = cycle(&mut s, 0, rist, Some(off));
+        // (AIPos as sent: 4 decimals of a degree.)
+        assert!(s.start_joints().max_abs_diff(&Joints::from_degrees(off)) <= 0.5e-4f64.to_radians() + 1e-12);
+        // The first answer brings the axes to our joints for the home pose
+        // (the generator holds home): AKorr = home joints − AIPos, to the
+        // 4 decimals sent and AIPos's rounding.
+        let a = a.unwrap();
+        let expect = [-0.25, 0.0, 0.0, 0.0, 0.0, 0.5];
+        assert!(a.iter().zip(expect).all(|(x, e)| (x - e).abs() <= 1e-4 + 1e-12), "{a:?}");
+        // Without AIPos in the SEND list: the solution for RIst nearest home.
+        let mut s = session(Correction::Axis);
+        let (_, a) = cycle(&mut s, 0, rist, None);
+        assert_eq!(a, Some([0.0; 6]));
+        assert!(s.start_joints().max_abs_diff(&Joints::from_degrees(aipos)) < 1e-6);
+    }
+
+    #[test]
+    fn a_stroke_is_sent_as_the_joints_of_the_cartesian_correction() {
+        // The same stroke in both modes: the joints sent in axis mode are the
+        // joints of the pose sent in Cartesian mode, and AKorr their offset
+        // from the start joints.
+        let (rist, aipos) = home();
+        let arm = MotionLimits::from_robot(&cal().robot).arm;
+        let mut c = session(Correction::Cartesian);
+        let mut s = session(Correction::Axis);
+        let mut moved = 0.0f64;
+        for k in 0..90 {
+            if k % 5 == 1 {
+                c.set_plan(plan(k as u32, k));
+                s.set_plan(plan(k as u32, k));
+            }
+            let (r, _) = cycle(&mut c, k, rist, Some(aipos));
+            let (_, a) = cycle(&mut s, k, rist, Some(aipos));
+            let (r, a) = (r.unwrap().to_array(), a.unwrap());
+            let q = s.last_sent_joints();
+            for i in 0..6 {
+                let expect = (q.0[i] - s.start_joints().0[i]).to_degrees();
+                assert_eq!((a[i] * 1e4).round(), (expect * 1e4).round(), "cycle {k} A{}", i + 1);
+            }
+            // FK of the joints sent = the Cartesian pose sent (RKorr + start).
+            let p = arm.tcp(&q).to_pose6();
+            let start = c.start_pose();
+            for i in 0..3 {
+                assert!((p[i] * 1e3 - (start[i] * 1e3 + r[i])).abs() < 2e-4, "cycle {k} axis {i}");
+            }
+            moved = moved.max(a.iter().fold(0.0f64, |m, x| m.max(x.abs())));
+            assert_eq!(c.last_command(), s.last_command(), "cycle {k}: the same commanded pose");
+        }
+        assert!(moved > 5.0, "the stroke moved the axes ({moved:.2}° at most)");
+        assert_eq!((s.stats().plans_accepted, s.stats().axis_held), (c.stats().plans_accepted, 0));
+    }
+
+    #[test]
+    fn a_pose_without_joints_is_held_counted_and_reported() {
+        let (rist, aipos) = home();
+        let mut s = session(Correction::Axis);
+        for k in 0..3 {
+            cycle(&mut s, k, rist, Some(aipos));
+        }
+        while s.poll_event().is_some() {}
+        let before = (s.last_axis_correction(), s.last_sent_joints(), s.last_command());
+        // Out of reach: 3 m in front of the robot.
+        let far = [3.0, 0.0, 0.4, 0.0, 0.0, 0.0];
+        s.axis_correction(&far, &far, 77);
+        s.axis_correction(&far, &far, 81);
+        assert_eq!(s.stats().axis_held, 2);
+        assert_eq!(s.poll_event(), Some(SessionEvent::AxisHeld { ipoc: 77, reason: Unreachable::OutOfReach }));
+        assert_eq!(s.poll_event(), None, "one event per run of held cycles");
+        assert_eq!((s.last_axis_correction(), s.last_sent_joints(), s.last_command()), before);
+        // The singular wrist: a pose whose nearest joints have A5 = 0.5°.
+        let arm = MotionLimits::from_robot(&cal().robot).arm;
+        let mut q = Joints::from_degrees(aipos);
+        q.0[4] = 0.5f64.to_radians();
+        let singular = arm.tcp(&q).to_pose6();
+        s.axis_correction(&singular, &singular, 85);
+        assert_eq!(s.stats().axis_held, 3);
+        assert_eq!(s.poll_event(), None, "still the same run");
+        // A reachable pose ends the run; the next unreachable one starts another.
+        let mut q = Joints::from_degrees(aipos);
+        q.0[0] += 0.01;
+        let near = arm.tcp(&q).to_pose6();
+        s.axis_correction(&near, &near, 89);
+        assert_eq!(s.stats().axis_held, 3);
+        assert!(s.last_sent_joints().max_abs_diff(&q) < 1e-9);
+        assert_eq!((s.last_axis_correction()[0] * 1e6).round(), (0.01f64.to_degrees() * 1e6).round());
+        s.axis_correction(&singular, &singular, 93);
+        let Some(SessionEvent::AxisHeld { ipoc: 93, reason: Unreachable::Limit(v) }) = s.poll_event() else {
+            panic!("no AxisHeld for the singular wrist")
+        };
+        assert_eq!((v.axis, v.kind), (Axis::A5, LimitKind::SingularWrist));
+        // The answer carries the held correction.
+        let held = s.last_axis_correction();
+        assert!(held[0] > 0.5);
+        let (_, a) = cycle(&mut s, 3, rist, Some(aipos));
+        assert!(a.is_some());
     }
 }

@@ -94,6 +94,8 @@ pub struct RuntimeConfig {
     pub logo: Option<LogoRuntime>,
     /// Compensate the robot's dead time and lag (`[servo]`).
     pub servo_compensation: bool,
+    /// Cartesian (RKorr) or axis (AKorr) correction (`[rsi] correction`).
+    pub correction: topspin_core::rsi::session::Correction,
 }
 
 /// The logo thread's settings.
@@ -141,6 +143,7 @@ impl RuntimeConfig {
             record_rsi: false,
             logo: None,
             servo_compensation: true,
+            correction: topspin_core::rsi::session::Correction::Cartesian,
         }
     }
 }
@@ -257,6 +260,7 @@ impl Daemon {
         let tracker_addr = tracker_socket.local_addr()?;
         let mut session_cfg = SessionConfig::from_calibration(cal, &cfg.sentype);
         session_cfg.servo.enabled = cfg.servo_compensation;
+        session_cfg.correction = cfg.correction;
         let session =
             RsiSession::new(session_cfg).map_err(|e| io::Error::new(io::ErrorKind::InvalidInput, e.to_string()))?;
         let server = RsiServer::bind(cfg.rsi_bind, session, cfg.rsi_wait)?;

@@ -441,7 +441,10 @@ fn tally(s: &mut TelemetrySummary, e: &Telemetry, sink: &mut Option<Box<dyn Tele
                     s.controller_late = *delay;
                     tracing::warn!(target: "topspin::rsi", delay, "controller counted late answers");
                 }
-                SessionEvent::Malformed(_) | SessionEvent::SlowAnswer { .. } | SessionEvent::IpocGap { .. } => {
+                SessionEvent::Malformed(_)
+                | SessionEvent::SlowAnswer { .. }
+                | SessionEvent::IpocGap { .. }
+                | SessionEvent::AxisHeld { .. } => {
                     tracing::warn!(target: "topspin::rsi", ?ev)
                 }
                 _ => tracing::info!(target: "topspin::rsi", ?ev),

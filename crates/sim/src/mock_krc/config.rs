@@ -1,14 +1,35 @@
-//! The controller-side files of `rsi/`, read the way the mock needs them.
+//! The controller-side files of `rsi/`, read the way the mock needs them:
+//! the Cartesian pair (`topspin_ethernet.xml`, `topspin.rsi.xml`: RKorr into
+//! POSCORR) and the axis pair (`topspin_axis_ethernet.xml`,
+//! `topspin_axis.rsi.xml`: AKorr into AXISCORR).
 
 use std::net::{IpAddr, SocketAddr};
 
 use topspin_core::rsi::codec::RobElement;
+use topspin_core::rsi::session::Correction;
 use topspin_core::rsi::xml::{Scanner, Token, XmlError, attr, trim};
 
 /// `rsi/topspin_ethernet.xml`, compiled in.
 pub const DEFAULT_ETHERNET_XML: &str = include_str!("../../../../rsi/topspin_ethernet.xml");
 /// `rsi/topspin.rsi.xml`, compiled in.
 pub const DEFAULT_CONTEXT_XML: &str = include_str!("../../../../rsi/topspin.rsi.xml");
+/// `rsi/topspin_axis_ethernet.xml`, compiled in.
+pub const AXIS_ETHERNET_XML: &str = include_str!("../../../../rsi/topspin_axis_ethernet.xml");
+/// `rsi/topspin_axis.rsi.xml`, compiled in.
+pub const AXIS_CONTEXT_XML: &str = include_str!("../../../../rsi/topspin_axis.rsi.xml");
+
+/// The names of a correction's two files in `rsi/` (Ethernet, context)
+/// and their compiled-in texts.
+pub fn rsi_files(c: Correction) -> [(&'static str, &'static str); 2] {
+    match c {
+        Correction::Cartesian => {
+            [("topspin_ethernet.xml", DEFAULT_ETHERNET_XML), ("topspin.rsi.xml", DEFAULT_CONTEXT_XML)]
+        }
+        Correction::Axis => {
+            [("topspin_axis_ethernet.xml", AXIS_ETHERNET_XML), ("topspin_axis.rsi.xml", AXIS_CONTEXT_XML)]
+        }
+    }
+}
 
 /// Why a controller-side file cannot be used.
 #[derive(Debug, thiserror::Error)]
@@ -19,6 +40,8 @@ pub enum RsiFileError {
     Missing { file: &'static str, what: &'static str },
     #[error("{file}: bad value for {what}")]
     Bad { file: &'static str, what: &'static str },
+    #[error("the Ethernet configuration receives {received} but the RSI context has no {object} object")]
+    Mismatch { received: &'static str, object: &'static str },
 }
 
 /// The ETHERNET object's configuration.
@@ -37,6 +60,12 @@ pub struct EthernetConfig {
 impl EthernetConfig {
     pub(crate) fn sensor_addr(&self) -> SocketAddr {
         SocketAddr::new(self.ip, self.port)
+    }
+
+    /// The correction the RECEIVE list takes: `AKorr.*` tags make it axis,
+    /// else Cartesian (`RKorr.*`).
+    pub fn correction(&self) -> Correction {
+        if self.receive.iter().any(|t| t.starts_with("AKorr.")) { Correction::Axis } else { Correction::Cartesian }
     }
 
     pub fn parse(text: &str) -> Result<Self, RsiFileError> {
@@ -110,6 +139,14 @@ pub struct ContextConfig {
     /// POSCORRMON: total translation / rotation that stop the robot.
     pub mon_max_trans_mm: f64,
     pub mon_max_rot_deg: f64,
+    /// A POSCORR / an AXISCORR object is in the context.
+    pub poscorr: bool,
+    pub axiscorr: bool,
+    /// AXISCORR: correction limits per axis A1..A6, degrees.
+    pub axis_lower_deg: [f64; 6],
+    pub axis_upper_deg: [f64; 6],
+    /// AXISCORRMON: |total correction| per axis that stops RSI, degrees.
+    pub axis_mon_max_deg: [f64; 6],
 }
 
 impl ContextConfig {
@@ -127,6 +164,11 @@ impl ContextConfig {
             max_rot_deg: f64::INFINITY,
             mon_max_trans_mm: f64::INFINITY,
             mon_max_rot_deg: f64::INFINITY,
+            poscorr: false,
+            axiscorr: false,
+            axis_lower_deg: [f64::NEG_INFINITY; 6],
+            axis_upper_deg: [f64::INFINITY; 6],
+            axis_mon_max_deg: [f64::INFINITY; 6],
         };
         let mut seen_ethernet = false;
         while let Some(t) = s.next_token() {
@@ -136,6 +178,8 @@ impl ContextConfig {
             if name == b"RSIObject" {
                 obj = attr(attrs, b"ObjType").map_err(xml)?.unwrap_or(b"").to_ascii_uppercase();
                 seen_ethernet |= obj == b"ETHERNET";
+                c.poscorr |= obj == b"POSCORR";
+                c.axiscorr |= obj == b"AXISCORR";
                 continue;
             }
             if name != b"Parameter" {
@@ -160,6 +204,29 @@ impl ContextConfig {
                 (b"POSCORR", b"MaxRotAngle") => c.max_rot_deg = num("MaxRotAngle")?,
                 (b"POSCORRMON", b"MaxTrans") => c.mon_max_trans_mm = num("MaxTrans")?,
                 (b"POSCORRMON", b"MaxRotAngle") => c.mon_max_rot_deg = num("MaxRotAngle")?,
+                (b"AXISCORR" | b"AXISCORRMON", _) => {
+                    // LowerLimA1..A6, UpperLimA1..A6, MaxA1..A6 (E1..E6: no external axes).
+                    let axis = |prefix: &[u8]| {
+                        pname.strip_prefix(prefix).and_then(|r| match r {
+                            [b'A', d @ b'1'..=b'6'] => Some((d - b'1') as usize),
+                            _ => None,
+                        })
+                    };
+                    let what = "AXISCORR/AXISCORRMON limit";
+                    if obj == b"AXISCORR" {
+                        if let Some(i) = axis(b"LowerLim") {
+                            c.axis_lower_deg[i] = num(what)?;
+                        } else if let Some(i) = axis(b"UpperLim") {
+                            c.axis_upper_deg[i] = num(what)?;
+                        }
+                    } else if let Some(i) = axis(b"Max") {
+                        let v = num(what)?;
+                        if v < 0.0 {
+                            return Err(RsiFileError::Bad { file: F, what });
+                        }
+                        c.axis_mon_max_deg[i] = v;
+                    }
+                }
                 _ => {}
             }
         }
@@ -169,7 +236,22 @@ impl ContextConfig {
         if c.precision > topspin_core::rsi::codec::MAX_PRECISION || c.timeout == 0 {
             return Err(RsiFileError::Bad { file: F, what: "Precision/Timeout" });
         }
+        if (0..6).any(|i| c.axis_lower_deg[i] > 0.0 || c.axis_upper_deg[i] < 0.0) {
+            return Err(RsiFileError::Bad { file: F, what: "AXISCORR limits (lower ≤ 0 ≤ upper)" });
+        }
         Ok(c)
+    }
+
+    /// Checks that the context has the object the Ethernet configuration
+    /// feeds (AXISCORR for AKorr, POSCORR for RKorr).
+    pub fn check_feeds(&self, e: &EthernetConfig) -> Result<(), RsiFileError> {
+        match e.correction() {
+            Correction::Axis if !self.axiscorr => Err(RsiFileError::Mismatch { received: "AKorr", object: "AXISCORR" }),
+            Correction::Cartesian if !self.poscorr => {
+                Err(RsiFileError::Mismatch { received: "RKorr", object: "POSCORR" })
+            }
+            _ => Ok(()),
+        }
     }
 }
 
@@ -197,5 +279,51 @@ mod tests {
         let src = include_str!("../../../../rsi/topspin_rsi.src");
         assert!(src.contains("RSI_ON(#ABSOLUTE, #IPO_FAST)"));
         assert!(src.contains("PTP {X 350.0, Y 0.0, Z 450.0, A 180.0, B 0.0, C 0.0}"));
+        assert_eq!(e.correction(), Correction::Cartesian);
+        assert!(c.poscorr && !c.axiscorr);
+        c.check_feeds(&e).unwrap();
+    }
+
+    #[test]
+    fn the_axis_files_parse_and_stay_inside_the_software_limits() {
+        let e = EthernetConfig::parse(AXIS_ETHERNET_XML).unwrap();
+        assert_eq!(e.correction(), Correction::Axis);
+        assert_eq!(e.receive, ["AKorr.A1", "AKorr.A2", "AKorr.A3", "AKorr.A4", "AKorr.A5", "AKorr.A6"]);
+        let cart = EthernetConfig::parse(DEFAULT_ETHERNET_XML).unwrap();
+        assert_eq!((e.ip, e.port, &e.sentype, &e.send), (cart.ip, cart.port, &cart.sentype, &cart.send));
+        let c = ContextConfig::parse(AXIS_CONTEXT_XML).unwrap();
+        assert_eq!(c.config_file, "topspin_axis_ethernet.xml");
+        assert!(c.axiscorr && !c.poscorr);
+        c.check_feeds(&e).unwrap();
+        assert_eq!(c.axis_lower_deg, [-90.0, -60.0, -100.0, -150.0, -66.0, -180.0]);
+        assert_eq!(c.axis_upper_deg, [90.0, 90.0, 30.0, 150.0, 45.0, 180.0]);
+        assert_eq!(c.axis_mon_max_deg, [95.0, 95.0, 105.0, 155.0, 70.0, 185.0]);
+        let r = Calibration::default_cell().robot;
+        assert_eq!(c.timeout, r.rsi.late_limit);
+        // From home, AXISCORR never lets an axis past its software limit switch.
+        let arm = r.arm();
+        let home = r.home_joints(&arm).unwrap().degrees();
+        for (i, h) in home.iter().enumerate() {
+            let (lo, hi) = (arm.limits.min[i].to_degrees(), arm.limits.max[i].to_degrees());
+            assert!(h + c.axis_lower_deg[i] >= lo && h + c.axis_upper_deg[i] <= hi, "A{}", i + 1);
+            assert!(c.axis_mon_max_deg[i] >= c.axis_lower_deg[i].abs().max(c.axis_upper_deg[i]), "A{}", i + 1);
+        }
+        let src = include_str!("../../../../rsi/topspin_axis_rsi.src");
+        assert!(src.contains("RSI_CREATE(\"topspin_axis.rsi\", CONTID, TRUE)"));
+        assert!(src.contains("RSI_ON(#ABSOLUTE, #IPO_FAST)"));
+        // A context without AXISCORR for an Ethernet configuration sending AKorr is refused.
+        let cart_ctx = ContextConfig::parse(DEFAULT_CONTEXT_XML).unwrap();
+        assert!(matches!(cart_ctx.check_feeds(&e), Err(RsiFileError::Mismatch { object: "AXISCORR", .. })));
+        assert!(matches!(c.check_feeds(&cart), Err(RsiFileError::Mismatch { object: "POSCORR", .. })));
+        // Bad limits are named.
+        let bad = AXIS_CONTEXT_XML.replace(
+            "\"LowerLimA3\" ParamID=\"3\" ParamValue=\"-100.0\"",
+            "\"LowerLimA3\" ParamID=\"3\" ParamValue=\"x\"",
+        );
+        assert_ne!(bad, AXIS_CONTEXT_XML);
+        assert!(matches!(ContextConfig::parse(&bad), Err(RsiFileError::Bad { .. })));
+        let bad = AXIS_CONTEXT_XML.replace("ParamValue=\"30.0\"", "ParamValue=\"-5.0\"");
+        assert_ne!(bad, AXIS_CONTEXT_XML);
+        assert!(matches!(ContextConfig::parse(&bad), Err(RsiFileError::Bad { .. })));
     }
 }

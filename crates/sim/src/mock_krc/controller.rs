@@ -12,13 +12,25 @@
 //! (`AIPos`); the actual TCP (`RIst`) is the forward kinematics of the
 //! actual joints. A late cycle keeps the last correction (HOLDON).
 //!
+//! With an axis context (`ControllerConfig::correction` = axis) it takes
+//! `<AKorr A1..A6>` instead (degrees, #ABSOLUTE: from the joints at RSI
+//! start): AXISCORR clamps each axis's correction to its limits (counted,
+//! `axiscorr_clamped`), AXISCORRMON stops RSI when a clamped total exceeds
+//! its maximum, and the commanded joints go through the software limit
+//! switches, the dead time and the lag as above; `RSol` is their forward
+//! kinematics. An answer that carries only the other correction (RKorr to
+//! an axis context, AKorr to a Cartesian one) is on time but the context
+//! finds none of its RECEIVE tags in it: every correction holds (HOLDON),
+//! as for an answer with no correction at all, and it is counted
+//! (`wrong_kind`).
+//!
 //! It stops as a KR C4 does, naming the reason ([`StopReason`]): a
 //! commanded pose out of reach or past a software limit switch, a wrist
 //! through its singularity, an axis turning or accelerating beyond its
 //! limits (checked on the actual joints: what the drives and gears must
 //! deliver, so a command that jumps, e.g. HOLDON mid-stroke, stops the
-//! robot through the lag as "command gear torque" does), POSCORRMON, or
-//! too many late answers. After a stop the robot stands and RSI sends
+//! robot through the lag as "command gear torque" does), POSCORRMON,
+//! AXISCORRMON, or too many late answers. After a stop the robot stands and RSI sends
 //! nothing more.
 
 #![allow(clippy::needless_range_loop)] // parallel per-axis arrays
@@ -26,9 +38,10 @@
 use std::collections::VecDeque;
 use std::fmt;
 
-use topspin_core::kinematics::{AXES, Arm, Joints, LimitKind, LimitViolation, Pose, Unreachable};
+use topspin_core::kinematics::{AXES, Arm, Axis, Joints, LimitKind, LimitViolation, Pose, Unreachable};
 use topspin_core::motion::limits::unwrap_near;
 use topspin_core::rsi::codec::{CodecError, KukaPose, RobElement, RobFrame, SenFrame};
+use topspin_core::rsi::session::Correction;
 use topspin_core::time::Instant;
 
 /// The longest dead time the mock models, cycles.
@@ -55,6 +68,8 @@ pub enum StopReason {
     LateLimit,
     /// POSCORRMON: total correction too large.
     Monitor,
+    /// AXISCORRMON: this axis's total correction too large.
+    AxisMonitor(Axis),
     /// The commanded pose has no joint solution (out of the arm's reach).
     OutOfReach,
     /// A commanded or actual axis broke a limit: software limit switch,
@@ -66,11 +81,12 @@ pub enum StopReason {
 impl StopReason {
     /// A short key for counting stops by reason (`late_limit`, `monitor`,
     /// `out_of_reach`, `software_limit_a3`, `singular_wrist`,
-    /// `speed_a1`, `gear_torque_a2`).
+    /// `speed_a1`, `gear_torque_a2`, `axis_monitor_a4`).
     pub fn key(&self) -> String {
         match self {
             StopReason::LateLimit => "late_limit".into(),
             StopReason::Monitor => "monitor".into(),
+            StopReason::AxisMonitor(a) => format!("axis_monitor_{}", a.to_string().to_lowercase()),
             StopReason::OutOfReach => "out_of_reach".into(),
             StopReason::Axis(v) => {
                 let axis = v.axis.to_string().to_lowercase();
@@ -90,6 +106,7 @@ impl fmt::Display for StopReason {
         match self {
             StopReason::LateLimit => write!(f, "RSI timeout: too many late answers"),
             StopReason::Monitor => write!(f, "correction monitor (POSCORRMON)"),
+            StopReason::AxisMonitor(a) => write!(f, "axis correction monitor (AXISCORRMON): {a}"),
             StopReason::OutOfReach => write!(f, "commanded pose out of the arm's reach"),
             StopReason::Axis(v) if v.kind == LimitKind::Acceleration => write!(f, "command gear torque: {v}"),
             StopReason::Axis(v) => write!(f, "{v}"),
@@ -117,6 +134,9 @@ pub enum Verdict {
 pub struct ControllerConfig {
     pub cycle_ms: u32,
     pub mode: CorrMode,
+    /// Which correction the RSI context takes: RKorr (POSCORR) or AKorr
+    /// (AXISCORR).
+    pub correction: Correction,
     pub sentype: String,
     pub precision: u8,
     pub send: Vec<RobElement>,
@@ -143,6 +163,11 @@ pub struct ControllerConfig {
     pub max_rot_deg: f64,
     pub mon_max_trans_mm: f64,
     pub mon_max_rot_deg: f64,
+    /// AXISCORR (per-axis correction limits, degrees) and AXISCORRMON
+    /// (|total| per axis that stops RSI, degrees).
+    pub axis_lower_deg: [f64; 6],
+    pub axis_upper_deg: [f64; 6],
+    pub axis_mon_max_deg: [f64; 6],
     /// First IPOC.
     pub first_ipoc: u64,
 }
@@ -153,7 +178,8 @@ pub struct PathSample {
     /// When the robot is at `actual`.
     pub t: Instant,
     pub ipoc: u64,
-    /// Commanded pose after POSCORR (mm, deg, BASE).
+    /// Commanded pose after POSCORR (mm, deg, BASE); with AXISCORR the
+    /// forward kinematics of the commanded joints.
     pub commanded: [f64; 6],
     /// Where the robot is: the forward kinematics of `joints`.
     pub actual: [f64; 6],
@@ -175,6 +201,8 @@ pub struct MockController {
     /// commands of the last `dead_time_cycles` cycles, oldest first.
     q_cmd: Joints,
     line: VecDeque<Joints>,
+    /// The commanded joints at RSI start (AKorr's zero).
+    q_start: Joints,
     /// Actual joints, their speed and acceleration (rad, /s, /s²).
     q_act: Joints,
     qd_act: [f64; AXES],
@@ -186,6 +214,13 @@ pub struct MockController {
     pub wrong_type: u64,
     pub malformed: u64,
     pub poscorr_clamped: u64,
+    /// Cycles whose AKorr AXISCORR clamped.
+    pub axiscorr_clamped: u64,
+    /// On-time answers with only the other kind of correction (held).
+    pub wrong_kind: u64,
+    /// The smallest and largest AKorr asked per axis (before AXISCORR),
+    /// degrees: the range the axis context's limits must cover.
+    pub akorr_range_deg: [[f64; 2]; 6],
     pub cycles: u64,
     /// The fastest any axis turned, as a share of its limit (its peak).
     pub peak_speed_share: f64,
@@ -215,6 +250,7 @@ impl MockController {
             actual: cfg.start,
             q_cmd: q0,
             line,
+            q_start: q0,
             q_act: q0,
             qd_act: [0.0; AXES],
             lag_step,
@@ -224,6 +260,9 @@ impl MockController {
             wrong_type: 0,
             malformed: 0,
             poscorr_clamped: 0,
+            axiscorr_clamped: 0,
+            wrong_kind: 0,
+            akorr_range_deg: [[0.0; 2]; 6],
             cycles: 0,
             peak_speed_share: 0.0,
             peak_acceleration_share: 0.0,
@@ -270,6 +309,9 @@ impl MockController {
     /// there through the dead time and the lag.
     pub fn move_start(&mut self, start: [f64; 6]) {
         self.cfg.start = start;
+        if let Ok(q) = self.cfg.arm.inverse_near(&kuka_pose(&start), &self.q_cmd) {
+            self.q_start = q;
+        }
     }
 
     /// Offers an answer received before this cycle's deadline.
@@ -292,8 +334,16 @@ impl MockController {
         if self.answered.is_some() {
             return Verdict::Extra;
         }
-        // No RKorr in the answer: the correction holds (HOLDON).
-        self.answered = Some(sen.rkorr.map(KukaPose::to_array).unwrap_or(self.correction));
+        // None of the context's RECEIVE tags in the answer: the correction
+        // holds (HOLDON).
+        let (k, other) = match self.cfg.correction {
+            Correction::Cartesian => (sen.rkorr.map(KukaPose::to_array), sen.akorr.is_some()),
+            Correction::Axis => (sen.akorr, sen.rkorr.is_some()),
+        };
+        if k.is_none() && other {
+            self.wrong_kind += 1;
+        }
+        self.answered = Some(k.unwrap_or(self.correction));
         Verdict::Accepted
     }
 
@@ -319,11 +369,20 @@ impl MockController {
                 }
             }
         }
-        if self.stopped.is_none() {
-            self.apply_poscorr();
-        }
-        if self.stopped.is_none() {
-            self.command_joints();
+        match self.cfg.correction {
+            Correction::Cartesian => {
+                if self.stopped.is_none() {
+                    self.apply_poscorr();
+                }
+                if self.stopped.is_none() {
+                    self.command_joints();
+                }
+            }
+            Correction::Axis => {
+                if self.stopped.is_none() {
+                    self.apply_axiscorr();
+                }
+            }
         }
         if self.stopped.is_none() {
             self.follow();
@@ -372,6 +431,45 @@ impl MockController {
         }
         for i in 0..6 {
             self.commanded[i] = c.start[i] + k[i];
+        }
+    }
+
+    /// AXISCORR: each axis's correction clamped to its limits (a
+    /// non-finite one to 0), AXISCORRMON on the clamped total; the
+    /// commanded joints (start + correction) within the software limit
+    /// switches and off the singular wrist, else the robot stops.
+    fn apply_axiscorr(&mut self) {
+        let c = &self.cfg;
+        let mut k = self.correction;
+        let mut clamped = false;
+        for (i, x) in k.iter_mut().enumerate() {
+            if x.is_finite() {
+                let r = &mut self.akorr_range_deg[i];
+                *r = [r[0].min(*x), r[1].max(*x)];
+            }
+            let y = if x.is_finite() { x.clamp(c.axis_lower_deg[i], c.axis_upper_deg[i]) } else { 0.0 };
+            clamped |= y != *x;
+            *x = y;
+        }
+        if clamped {
+            self.axiscorr_clamped += 1;
+        }
+        if let Some(i) = (0..AXES).find(|&i| k[i].abs() > c.axis_mon_max_deg[i]) {
+            self.stopped = Some(StopReason::AxisMonitor(Axis::ALL[i]));
+            return;
+        }
+        let q = Joints(core::array::from_fn(|i| self.q_start.0[i] + k[i].to_radians()));
+        if let Err(v) = c.arm.limits.check_position(&q) {
+            self.stopped = Some(StopReason::Axis(v));
+            return;
+        }
+        self.q_cmd = q;
+        let p = c.arm.tcp(&q).to_pose6();
+        for i in 0..3 {
+            self.commanded[i] = p[i] * 1e3;
+        }
+        for i in 3..6 {
+            self.commanded[i] = unwrap_near(p[i], self.commanded[i].to_radians()).to_degrees();
         }
     }
 
@@ -528,5 +626,105 @@ mod tests {
         c4.end_cycle(Instant(4_000_000));
         assert_eq!((c4.stopped, c4.rates_over), (None, 1));
         drop(c);
+    }
+
+    fn axis_controller() -> MockController {
+        let mut cfg = MockKrcConfig::default_cell_for(Correction::Axis).unwrap().controller;
+        cfg.dead_time_cycles = 0;
+        cfg.lag_s = 0.0;
+        MockController::new(cfg)
+    }
+
+    fn sen(ipoc: u64, rkorr: Option<[f64; 6]>, akorr: Option<[f64; 6]>) -> Vec<u8> {
+        let mut buf = [0u8; 512];
+        let n = SenFrame { sentype: "ImFree", estr: None, rkorr: rkorr.map(KukaPose::from_array), akorr, ipoc }
+            .emit(4, &mut buf)
+            .unwrap();
+        buf[..n].to_vec()
+    }
+
+    #[test]
+    fn an_axis_context_moves_the_joints_by_akorr_from_the_start_joints() {
+        let mut c = axis_controller();
+        assert_eq!(c.config().correction, Correction::Axis);
+        let q0 = c.joints().degrees();
+        let k = [1.5, -2.0, 0.25, 3.0, -1.0, 10.0];
+        assert_eq!(c.answer(&sen(c.ipoc(), None, Some(k))), Verdict::Accepted);
+        let s = c.end_cycle(Instant(4_000_000));
+        for i in 0..6 {
+            assert!((s.joints[i] - (q0[i] + k[i])).abs() < 1e-9, "A{}: {} vs {}", i + 1, s.joints[i], q0[i] + k[i]);
+        }
+        // RSol / RIst: the forward kinematics of the commanded joints.
+        let p = c.config().arm.tcp(&Joints::from_degrees(s.joints)).to_pose6();
+        assert!((0..3).all(|i| (s.commanded[i] - p[i] * 1e3).abs() < 1e-9 && (s.actual[i] - p[i] * 1e3).abs() < 1e-9));
+        // #ABSOLUTE: the same AKorr again leaves the axes where they are.
+        assert_eq!(c.answer(&sen(c.ipoc(), None, Some(k))), Verdict::Accepted);
+        let s2 = c.end_cycle(Instant(8_000_000));
+        assert_eq!(s2.joints, s.joints);
+        assert_eq!((c.axiscorr_clamped, c.poscorr_clamped, c.wrong_kind, c.stopped), (0, 0, 0, None));
+    }
+
+    #[test]
+    fn axiscorr_clamps_and_axiscorrmon_stops_naming_the_axis() {
+        // AXISCORR: A1 at +120° is held at its +90° limit, counted.
+        let mut c = axis_controller();
+        let q0 = c.joints().degrees();
+        c.answered = Some([120.0, 0.0, 0.0, 0.0, 0.0, 0.0]);
+        let s = c.end_cycle(Instant(4_000_000));
+        assert!((s.joints[0] - (q0[0] + 90.0)).abs() < 1e-9);
+        assert_eq!((c.axiscorr_clamped, c.stopped), (1, None));
+        // AXISCORRMON below the clamp: the total past it stops RSI.
+        let mut cfg = axis_controller().config().clone();
+        cfg.axis_mon_max_deg[3] = 20.0;
+        let mut c = MockController::new(cfg);
+        c.answered = Some([0.0, 0.0, 0.0, 19.9, 0.0, 0.0]);
+        c.end_cycle(Instant(4_000_000));
+        assert_eq!(c.stopped, None);
+        c.answered = Some([0.0, 0.0, 0.0, -20.1, 0.0, 0.0]);
+        c.end_cycle(Instant(8_000_000));
+        assert_eq!(c.stopped, Some(StopReason::AxisMonitor(Axis::A4)));
+        assert_eq!(c.stopped.unwrap().key(), "axis_monitor_a4");
+        assert_eq!(c.stopped.unwrap().to_string(), "axis correction monitor (AXISCORRMON): A4");
+        // Through the wrist singularity (A5 to 0°): the robot stops.
+        let mut c = axis_controller();
+        let a5 = c.joints().degrees()[4];
+        let mut cfg = c.config().clone();
+        cfg.axis_lower_deg[4] = -180.0;
+        cfg.axis_mon_max_deg[4] = 180.0;
+        c = MockController::new(cfg);
+        c.answered = Some([0.0, 0.0, 0.0, 0.0, -a5, 0.0]);
+        c.end_cycle(Instant(4_000_000));
+        let Some(StopReason::Axis(v)) = c.stopped else { panic!("{:?}", c.stopped) };
+        assert_eq!((v.axis, v.kind), (Axis::A5, LimitKind::SingularWrist));
+        // A non-finite correction is clamped to zero, never applied.
+        let mut c = axis_controller();
+        let q0 = c.joints();
+        c.answered = Some([f64::NAN, 0.0, 0.0, 0.0, 0.0, 0.0]);
+        c.end_cycle(Instant(4_000_000));
+        assert_eq!((c.joints(), c.axiscorr_clamped, c.stopped), (q0, 1, None));
+    }
+
+    #[test]
+    fn the_wrong_kind_of_correction_is_held_and_counted() {
+        // RKorr to an axis context: on time, but no AKorr: the last one holds.
+        let mut c = axis_controller();
+        let k = [2.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+        assert_eq!(c.answer(&sen(c.ipoc(), None, Some(k))), Verdict::Accepted);
+        let held = c.end_cycle(Instant(4_000_000)).joints;
+        assert_eq!(c.answer(&sen(c.ipoc(), Some([50.0, 0.0, 0.0, 0.0, 0.0, 0.0]), None)), Verdict::Accepted);
+        let s = c.end_cycle(Instant(8_000_000));
+        assert_eq!((s.joints, s.on_time, c.wrong_kind, c.late), (held, true, 1, 0));
+        // AKorr to a Cartesian context: the same.
+        let mut cfg = MockKrcConfig::default_cell().unwrap().controller;
+        cfg.dead_time_cycles = 0;
+        cfg.lag_s = 0.0;
+        let mut c = MockController::new(cfg);
+        let x0 = c.actual()[0];
+        assert_eq!(c.answer(&sen(c.ipoc(), Some([1.0, 0.0, 0.0, 0.0, 0.0, 0.0]), None)), Verdict::Accepted);
+        c.end_cycle(Instant(4_000_000));
+        assert_eq!(c.answer(&sen(c.ipoc(), None, Some([30.0, 0.0, 0.0, 0.0, 0.0, 0.0]))), Verdict::Accepted);
+        let s = c.end_cycle(Instant(8_000_000));
+        assert!((s.actual[0] - (x0 + 1.0)).abs() < 1e-9);
+        assert_eq!((c.wrong_kind, c.stopped), (1, None));
     }
 }

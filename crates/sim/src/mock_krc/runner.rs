@@ -14,6 +14,7 @@ use super::config::{ContextConfig, EthernetConfig, RsiFileError};
 use super::controller::{ControllerConfig, CorrMode, MockController, PathSample, StopReason, Verdict};
 use super::faults::{FaultInjector, Faults, Link, MAX_DATAGRAM, UdpLink};
 use topspin_core::calib::RobotFile;
+use topspin_core::rsi::session::Correction;
 use topspin_core::time::{Duration, Instant};
 use topspin_daemon::clock::{self, SPIN_BEFORE_DEADLINE};
 use topspin_daemon::runtime::daemon::ThreadSpec;
@@ -48,7 +49,9 @@ impl MockKrcConfig {
     /// From the controller-side files and the robot cell: start at home
     /// (in the home joints), the arm's axis limits scaled by
     /// `robot_margin` (1.0: the robot is what the calibration says), the
-    /// calibration's dead time and lag.
+    /// calibration's dead time and lag; the correction (RKorr or AKorr)
+    /// the Ethernet configuration receives (see
+    /// [`ContextConfig::check_feeds`]).
     pub fn from_files(
         ethernet: &EthernetConfig,
         context: &ContextConfig,
@@ -63,6 +66,7 @@ impl MockKrcConfig {
         let controller = ControllerConfig {
             cycle_ms: robot.rsi.cycle_ms,
             mode,
+            correction: ethernet.correction(),
             sentype: ethernet.sentype.clone(),
             precision: context.precision,
             send: ethernet.send.clone(),
@@ -78,6 +82,9 @@ impl MockKrcConfig {
             max_rot_deg: context.max_rot_deg,
             mon_max_trans_mm: context.mon_max_trans_mm,
             mon_max_rot_deg: context.mon_max_rot_deg,
+            axis_lower_deg: context.axis_lower_deg,
+            axis_upper_deg: context.axis_upper_deg,
+            axis_mon_max_deg: context.axis_mon_max_deg,
             first_ipoc: 4_208_831,
         };
         MockKrcConfig {
@@ -92,10 +99,18 @@ impl MockKrcConfig {
         }
     }
 
-    /// From the compiled-in `rsi/` files and calibration.
+    /// From the compiled-in Cartesian `rsi/` files and calibration.
     pub fn default_cell() -> Result<Self, RsiFileError> {
-        let e = EthernetConfig::parse(super::config::DEFAULT_ETHERNET_XML)?;
-        let c = ContextConfig::parse(super::config::DEFAULT_CONTEXT_XML)?;
+        Self::default_cell_for(Correction::Cartesian)
+    }
+
+    /// From the compiled-in `rsi/` files of `correction` (the Cartesian
+    /// or the axis pair) and calibration.
+    pub fn default_cell_for(correction: Correction) -> Result<Self, RsiFileError> {
+        let [(_, ethernet), (_, context)] = super::config::rsi_files(correction);
+        let e = EthernetConfig::parse(ethernet)?;
+        let c = ContextConfig::parse(context)?;
+        c.check_feeds(&e)?;
         let r = topspin_core::calib::Calibration::default_cell().robot;
         Ok(Self::from_files(&e, &c, &r, CorrMode::Absolute, 1.0))
     }
@@ -113,6 +128,13 @@ pub struct MockResult {
     pub wrong_type: u64,
     pub malformed: u64,
     pub poscorr_clamped: u64,
+    /// Cycles whose AKorr AXISCORR clamped (axis context).
+    pub axiscorr_clamped: u64,
+    /// On-time answers carrying only the other kind of correction (held).
+    pub wrong_kind: u64,
+    /// The smallest and largest AKorr asked per axis, degrees (axis
+    /// context; zeros otherwise).
+    pub akorr_range_deg: [[f64; 2]; 6],
     /// Why the controller stopped RSI, if it did.
     pub stopped: Option<StopReason>,
     /// The fastest and hardest any axis moved, as shares of its limits.
@@ -307,6 +329,9 @@ fn cycle_loop<L: Link>(
     out.wrong_type = ctrl.wrong_type;
     out.malformed = ctrl.malformed;
     out.poscorr_clamped = ctrl.poscorr_clamped;
+    out.axiscorr_clamped = ctrl.axiscorr_clamped;
+    out.wrong_kind = ctrl.wrong_kind;
+    out.akorr_range_deg = ctrl.akorr_range_deg;
     out.stopped = ctrl.stopped;
     out.peak_speed_share = ctrl.peak_speed_share;
     out.peak_acceleration_share = ctrl.peak_acceleration_share;

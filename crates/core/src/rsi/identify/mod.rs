@@ -381,6 +381,7 @@ impl Identifier {
             sentype: &self.cfg.sentype,
             estr: self.cfg.estr.as_deref(),
             rkorr: Some(KukaPose { x: answer[0], y: answer[1], z: answer[2], ..KukaPose::default() }),
+            akorr: None,
             ipoc: rob.ipoc,
         };
         let len = frame.emit(self.cfg.precision, out).map_err(SessionError::Emit)?;
