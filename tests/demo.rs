@@ -22,7 +22,17 @@ fn thirty_balls_hit_with_no_late_answers() {
         .unwrap();
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let r: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
-    for key in ["balls", "hits", "hit_rate", "late_rsi_answers", "spin_err_pct_median", "hit_err_mm_median"] {
+    for key in [
+        "balls",
+        "hits",
+        "hit_rate",
+        "returns",
+        "return_rate",
+        "return_fails",
+        "late_rsi_answers",
+        "spin_err_pct_median",
+        "hit_err_mm_median",
+    ] {
         assert!(r.get(key).is_some(), "missing {key}");
     }
     for h in ["rsi_answer", "obs_to_plan"] {
@@ -31,9 +41,12 @@ fn thirty_balls_hit_with_no_late_answers() {
         }
     }
     eprintln!(
-        "demo: {} of {} reachable hit, late {} (answers after one cycle: {}), spin err {:.2}%, hit err {:.1} mm",
+        "demo: {} of {} reachable hit, {} returned ({}), late {} (answers after one cycle: {}), spin err {:.2}%, \
+         hit err {:.1} mm",
         r["hits"],
         r["reachable"],
+        r["returns"],
+        r["return_fails"],
         r["late_rsi_answers"],
         r["answers_after_cycle"],
         r["spin_err_pct_median"].as_f64().unwrap(),

@@ -159,9 +159,13 @@ pub fn table(r: &DemoReport) -> String {
             (true, Some(f)) => f.name().to_owned(),
         };
         let landing = b.landing_xy.map_or(String::new(), |p| format!(" at ({:+.2}, {:+.2}) m", p[0], p[1]));
+        let why = match (b.reachable, &b.return_why) {
+            (true, Some(w)) => format!(" — {w}"),
+            _ => String::new(),
+        };
         let _ = writeln!(
             out,
-            "{:4}  {:15}  {}  {}  {:>8}  {:>8}  {verdict:12}  {diag:30}  {ret}{landing}",
+            "{:4}  {:15}  {}  {}  {:>8}  {:>8}  {verdict:12}  {diag:30}  {ret}{landing}{why}",
             b.ball,
             b.setting,
             rps(&b.true_spin_rps),

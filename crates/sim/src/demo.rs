@@ -121,8 +121,10 @@ pub struct BallVerdict {
     /// The return: over the net onto the opponent's half, judged on the
     /// bat's actual pose and velocity where it met the ball.
     pub returned: bool,
-    /// Why not (`None` when returned).
+    /// Why not (`None` when returned), and what was wrong: the bat's
+    /// angle, speed, timing or position.
     pub return_fail: Option<ReturnFail>,
+    pub return_why: Option<String>,
     /// The bat and the ball at their contact (`None`: no contact).
     pub contact: Option<ContactReport>,
     /// Where the return first came down to the table's height (x, y), m.
@@ -472,6 +474,7 @@ pub(crate) fn judge_strokes(
             hit: closest.is_some_and(|d| d <= HIT_RADIUS),
             returned: ret.returned(),
             return_fail: ret.fail,
+            return_why: ret.why,
             contact: ret.contact,
             landing_xy: ret.landing,
         });

@@ -14,22 +14,28 @@
 //! not clear the net by [`NET_CLEARANCE`] is re-aimed [`DEEPER`] further
 //! back. θ stays within `strike.aim_tilt_deg`.
 //!
-//! Bounded and allocation-free: at most [`AIM_FLIGHTS`] flights per speed,
-//! each of at most [`AIM_T_MAX`]; a plan refined for the same ball starts
-//! from the last aim (its speed, face and Jacobian, or one speed slower),
-//! so a refinement usually costs one or two flights, and none when the
-//! prediction has hardly moved.
+//! Bounded and allocation-free: at most [`AIM_BUDGET`] flights per plan,
+//! each of at most [`AIM_T_MAX`]. The search is resumed by the next plan
+//! for the same ball (its face, speed and Jacobian): an unconverged aim is
+//! the best face found so far, a refinement usually costs one or two
+//! flights, and none when the prediction has hardly moved.
 
 use crate::calib::StrikeCalib;
 use crate::physics::{BallState, Propagator, RacketModel, Vec3};
 
-/// RK4 step of the return's flight while aiming, s (RK4 at 10 ms is within
-/// a millimetre of the 4 ms propagator over a return).
-pub(crate) const AIM_STEP: f64 = 0.01;
+/// RK4 step of the return's flight while aiming, s: its landing is within
+/// a centimetre of the 4 ms propagator's, at a fifth of the cost
+/// (`fly_is_the_propagators_flight`).
+pub(crate) const AIM_STEP: f64 = 0.02;
 /// Longest return flight followed while aiming, s.
 pub(crate) const AIM_T_MAX: f64 = 1.5;
-/// Most flights one aim may fly per bat speed.
-pub(crate) const AIM_FLIGHTS: usize = 8;
+/// Returns flown per plan at most (the estimator's hot path: a flight
+/// costs a few microseconds); an aim not converged within it goes on with
+/// the next observation's plan.
+pub const AIM_BUDGET: usize = 8;
+/// Returns flown at one speed without landing the ball before a faster
+/// bat is tried.
+pub(crate) const LEVEL_FLIGHTS: usize = 10;
 /// A landing this close to the target ends the search, m.
 pub(crate) const AIM_TOLERANCE: f64 = 0.03;
 /// The least height of the ball's bottom over the net's top, m: room for
@@ -62,7 +68,8 @@ pub struct Landing {
     pub over_net: f64,
 }
 
-/// One aim: the face and where the model says the ball lands.
+/// One aim: the face and where the model says the ball lands, and the
+/// search behind it (resumed by the next refinement).
 #[derive(Copy, Clone, Debug, PartialEq)]
 pub struct Aim {
     /// Face tilt θ (Euler b in T), rad: > 0 open.
@@ -78,13 +85,25 @@ pub struct Aim {
     pub speed_step: usize,
     /// The predicted ball it was aimed for.
     pub ball: BallState,
+    /// Returns flown by the call that made this aim.
+    pub flights: usize,
     /// The target aimed at (moved back where the net was in the way), m.
     pub target: [f64; 2],
     /// The landing is within [`AIM_TOLERANCE`] of the target and the net
     /// is cleared.
     pub converged: bool,
-    /// ∂(landing x, y)/∂(θ, ψ), kept for the next refinement.
-    jacobian: [[f64; 2]; 2],
+    /// Where the search stands: (θ, ψ), the speed step, and ∂(landing x,
+    /// y)/∂(θ, ψ) there (`None`: to be measured).
+    search: [f64; 2],
+    level: usize,
+    jacobian: Option<[[f64; 2]; 2]>,
+    /// Returns flown at this speed since it last landed the ball.
+    tries: usize,
+    /// The face has landed the ball at least once.
+    settled: bool,
+    /// Until it has: the nearest clear landing so far (miss, face, speed
+    /// step, landing).
+    best: Option<(f64, [f64; 2], usize, Landing)>,
 }
 
 /// The face's outward normal for tilt θ and heading ψ (Euler a = ψ,
@@ -179,19 +198,20 @@ impl AimBounds {
 /// the face alone cannot land the ball (slow backspin).
 pub(crate) const SPEED_STEPS: usize = 4;
 
-/// A new prediction this close to the last aim's keeps that aim: position,
-/// m; velocity, m/s; spin, rad/s (each moves the landing by under 1–3 cm).
+/// A new prediction this close to the last converged aim's keeps that
+/// aim: position, m; velocity, m/s; spin, rad/s (each moves the landing by
+/// under 1–3 cm).
 const REAIM_POS: f64 = 0.005;
 const REAIM_VEL: f64 = 0.02;
 const REAIM_SPIN: f64 = 5.0;
 
-/// A face this far inside its bounds may try the next slower bat, rad
-/// (10°); nearer a bound, the slower bat would want a face beyond it.
-const SLOWER_MARGIN: f64 = 0.1745;
-
 /// Aims the return of `ball` (the predicted state at the hit) at
-/// `target` (x, y in T), starting from `warm` (the last aim for this ball)
-/// or from tilt `tilt0` and the heading at the target.
+/// `target` (x, y in T): resumes the search of `warm` (the last aim for
+/// this ball) or starts one from tilt `tilt0` and the heading at the
+/// target, and flies at most `budget` returns (at least 3 for a start);
+/// an aim not yet converged is the best face found so far, and the next
+/// call goes on from where this one stopped.
+#[allow(clippy::too_many_arguments)]
 pub fn aim(
     bounds: &AimBounds,
     target: [f64; 2],
@@ -200,137 +220,151 @@ pub fn aim(
     ball: &BallState,
     tilt0: f64,
     warm: Option<&Aim>,
+    budget: usize,
 ) -> Aim {
     let (lo, hi) = bounds.tilt;
     if let Some(w) = warm
+        && w.converged
         && (w.ball.pos - ball.pos).norm() < REAIM_POS
         && (w.ball.vel - ball.vel).norm() < REAIM_VEL
         && (w.ball.spin - ball.spin).norm() < REAIM_SPIN
     {
-        return *w;
+        return Aim { flights: 0, ..*w };
     }
     let clamp = |p: [f64; 2]| [p[0].clamp(lo, hi), p[1].clamp(-MAX_HEADING, MAX_HEADING)];
     let mut target = warm.map_or(target, |w| w.target);
-    let heading = (ball.pos.y - target[1]).atan2(ball.pos.x - target[0]);
-    let mut flights = 0;
-    // Start at the last aim's speed, or one slower where its face had room.
-    let first = warm.map_or(0, |w| {
-        let room = (w.tilt - lo).min(hi - w.tilt);
-        if w.speed_step > 0 && room > SLOWER_MARGIN { w.speed_step - 1 } else { w.speed_step }
-    });
-    let mut last = None;
-    for k in first..SPEED_STEPS {
-        let speed = bounds.speed(k);
-        let fly_at = |p: &[f64; 2], flights: &mut usize| {
-            *flights += 1;
-            landing(prop, racket, ball, p[0], p[1], speed)
-        };
-        // A landing as a point (no contact: nowhere useful, far along +x).
-        let point = |l: Option<Landing>| l.map_or([100.0, 0.0], |l| [l.x, l.y]);
-        // From the last aim at its own speed; else afresh (from the rule's
-        // tilt, with a finite-difference Jacobian).
-        let resume = warm.filter(|w| w.speed_step == k);
-        let mut p = clamp(resume.map_or([tilt0, heading], |w| [w.tilt, w.heading]));
-        let mut here = fly_at(&p, &mut flights);
-        let mut j = match resume {
-            Some(w) => w.jacobian,
-            None => {
-                let f0 = point(here);
-                let ft = point(fly_at(&[p[0] + FD_STEP, p[1]], &mut flights));
-                let fh = point(fly_at(&[p[0], p[1] + FD_STEP], &mut flights));
-                [
+    let start = |target: &[f64; 2]| clamp([tilt0, (ball.pos.y - target[1]).atan2(ball.pos.x - target[0])]);
+    let (mut p, mut level, mut jac, mut tries) =
+        warm.map_or((start(&target), 0, None, 0), |w| (w.search, w.level, w.jacobian, w.tries));
+    let mut left = budget;
+    let mut flown = 0;
+    let fly_at = |p: &[f64; 2], level: usize, left: &mut usize, flown: &mut usize| {
+        *left = left.saturating_sub(1);
+        *flown += 1;
+        landing(prop, racket, ball, p[0], p[1], bounds.speed(level))
+    };
+    // A landing as a point (no contact: nowhere useful, far along +x).
+    let point = |l: &Option<Landing>| l.map_or([100.0, 0.0], |l| [l.x, l.y]);
+    let mut here: Option<Option<Landing>> = None;
+    // The best clear landing of this call: (miss, face, level, landing).
+    let mut best: Option<(f64, [f64; 2], usize, Landing)> = warm.and_then(|w| w.best);
+    let mut converged = false;
+    while left > 0 {
+        let now = *here.get_or_insert_with(|| fly_at(&p, level, &mut left, &mut flown));
+        let j = match jac {
+            Some(j) => j,
+            None if left >= 2 => {
+                let f0 = point(&now);
+                let ft = point(&fly_at(&[p[0] + FD_STEP, p[1]], level, &mut left, &mut flown));
+                let fh = point(&fly_at(&[p[0], p[1] + FD_STEP], level, &mut left, &mut flown));
+                let j = [
                     [(ft[0] - f0[0]) / FD_STEP, (fh[0] - f0[0]) / FD_STEP],
                     [(ft[1] - f0[1]) / FD_STEP, (fh[1] - f0[1]) / FD_STEP],
-                ]
+                ];
+                jac = Some(j);
+                j
             }
+            None => break,
         };
-        let mut best: Option<(f64, [f64; 2], Landing)> = None;
-        loop {
-            let f = point(here);
-            let clear = here.is_some_and(|l| l.over_net >= NET_CLEARANCE);
-            let mut res = [f[0] - target[0], f[1] - target[1]];
-            if !clear && res[0].hypot(res[1]) < RETARGET_NEAR && target[0] - DEEPER > -prop.table.length / 2.0 {
-                // On target but under (or into) the net: aim further back.
-                target[0] -= DEEPER;
-                res[0] += DEEPER;
-            }
-            let err = res[0].hypot(res[1]);
-            if let Some(l) = here
-                && clear
-                && best.is_none_or(|b| err < b.0)
-            {
-                best = Some((err, p, l));
-            }
-            if (clear && err < AIM_TOLERANCE) || flights >= AIM_FLIGHTS * (k + 1 - first) {
+        let f = point(&now);
+        let clear = now.is_some_and(|l| l.over_net >= NET_CLEARANCE);
+        let mut res = [f[0] - target[0], f[1] - target[1]];
+        if !clear && res[0].hypot(res[1]) < RETARGET_NEAR && target[0] - DEEPER > -prop.table.length / 2.0 {
+            // On target but under (or into) the net: aim further back.
+            target[0] -= DEEPER;
+            res[0] += DEEPER;
+        }
+        let err = res[0].hypot(res[1]);
+        if let Some(l) = now
+            && clear
+            && best.is_none_or(|b| err < b.0)
+        {
+            best = Some((err, p, level, l));
+        }
+        if clear && err < AIM_TOLERANCE {
+            converged = true;
+            // This speed does it: its count starts again.
+            tries = 0;
+            flown = 0;
+            break;
+        }
+        // Newton step on the current Jacobian, bounded. Opening the face
+        // sends the ball longer (∂x/∂θ < 0) until the return becomes a lob
+        // that comes down shorter again. On that side, close the face by a
+        // full step; at the turn, a ball still short of the target is out
+        // of this speed's reach.
+        let det = j[0][0] * j[1][1] - j[0][1] * j[1][0];
+        let slope = j[0][0];
+        let d = if slope.abs() <= LOB_SLOPE && res[0] > 0.0 {
+            [0.0, 0.0]
+        } else if slope > -LOB_SLOPE || !(det.abs() > 1e-9) {
+            [-MAX_STEP, if j[1][1].abs() > 1e-9 { (-res[1] / j[1][1]).clamp(-MAX_STEP, MAX_STEP) } else { 0.0 }]
+        } else {
+            [
+                (-(j[1][1] * res[0] - j[0][1] * res[1]) / det).clamp(-MAX_STEP, MAX_STEP),
+                (-(-j[1][0] * res[0] + j[0][0] * res[1]) / det).clamp(-MAX_STEP, MAX_STEP),
+            ]
+        };
+        let next = clamp([p[0] + d[0], p[1] + d[1]]);
+        let step = [next[0] - p[0], next[1] - p[1]];
+        let norm2 = step[0] * step[0] + step[1] * step[1];
+        let last = level + 1 >= SPEED_STEPS;
+        if norm2 < 1e-12 || (tries + flown >= LEVEL_FLIGHTS && !last) {
+            // Out of reach, against a bound, or not landing it after
+            // LEVEL_FLIGHTS: a faster bat, from the start.
+            if last {
                 break;
             }
-            // Newton step on the current Jacobian, bounded. Opening the face
-            // sends the ball longer (∂x/∂θ < 0) until the return becomes a
-            // lob that comes down shorter again. On that side, close the face
-            // by a full step; at the turn, a ball still short of the target
-            // is out of this speed's reach.
-            let det = j[0][0] * j[1][1] - j[0][1] * j[1][0];
-            let slope = j[0][0];
-            if slope.abs() <= LOB_SLOPE && res[0] > 0.0 {
-                break;
-            }
-            let d = if slope > -LOB_SLOPE || !(det.abs() > 1e-9) {
-                [-MAX_STEP, if j[1][1].abs() > 1e-9 { (-res[1] / j[1][1]).clamp(-MAX_STEP, MAX_STEP) } else { 0.0 }]
-            } else {
-                [
-                    (-(j[1][1] * res[0] - j[0][1] * res[1]) / det).clamp(-MAX_STEP, MAX_STEP),
-                    (-(-j[1][0] * res[0] + j[0][0] * res[1]) / det).clamp(-MAX_STEP, MAX_STEP),
-                ]
-            };
-            let next = clamp([p[0] + d[0], p[1] + d[1]]);
-            let step = [next[0] - p[0], next[1] - p[1]];
-            let norm2 = step[0] * step[0] + step[1] * step[1];
-            if norm2 < 1e-12 {
-                break; // against a bound
-            }
-            let there = fly_at(&next, &mut flights);
-            let g = point(there);
-            // Broyden: J += (Δf − J Δp) Δpᵀ / |Δp|².
-            let df = [g[0] - f[0], g[1] - f[1]];
-            for (i, row) in j.iter_mut().enumerate() {
-                let miss = df[i] - (row[0] * step[0] + row[1] * step[1]);
-                for (jj, x) in row.iter_mut().enumerate() {
-                    *x += miss * step[jj] / norm2;
-                }
-            }
-            p = next;
-            here = there;
+            level += 1;
+            p = start(&target);
+            jac = None;
+            here = None;
+            tries = 0;
+            flown = 0;
+            continue;
         }
-        let aim = match best {
-            Some((err, bp, l)) => Aim {
-                tilt: bp[0],
-                heading: bp[1],
-                speed,
-                speed_step: k,
-                ball: *ball,
-                landing: l,
-                target,
-                converged: err < AIM_TOLERANCE,
-                jacobian: j,
-            },
-            None => Aim {
-                tilt: p[0],
-                heading: p[1],
-                speed,
-                speed_step: k,
-                ball: *ball,
-                landing: here.unwrap_or(Landing { x: f64::NAN, y: f64::NAN, over_net: f64::NEG_INFINITY }),
-                target,
-                converged: false,
-                jacobian: j,
-            },
-        };
-        if aim.converged {
-            return aim;
+        let there = fly_at(&next, level, &mut left, &mut flown);
+        let g = point(&there);
+        // Broyden: J += (Δf − J Δp) Δpᵀ / |Δp|².
+        let df = [g[0] - f[0], g[1] - f[1]];
+        let mut j = j;
+        for (i, row) in j.iter_mut().enumerate() {
+            let miss = df[i] - (row[0] * step[0] + row[1] * step[1]);
+            for (k, x) in row.iter_mut().enumerate() {
+                *x += miss * step[k] / norm2;
+            }
         }
-        last = Some(aim);
+        jac = Some(j);
+        p = next;
+        here = Some(there);
     }
-    last.expect("at least one speed is tried")
+    let unknown = Landing { x: f64::NAN, y: f64::NAN, over_net: f64::NEG_INFINITY };
+    // The face: where the search converged; until it does again, the last
+    // converged one (it landed a ball very like this one); before any, the
+    // nearest clear landing found, or the start.
+    let settled = converged || warm.is_some_and(|w| w.settled);
+    let (face, out_level, landing) = match (converged, warm) {
+        (true, _) => (p, level, here.flatten().unwrap_or(unknown)),
+        (false, Some(w)) if w.settled => ([w.tilt, w.heading], w.speed_step, w.landing),
+        _ => best.map_or((start(&target), 0, unknown), |(_, bp, bl, l)| (bp, bl, l)),
+    };
+    Aim {
+        tilt: face[0],
+        heading: face[1],
+        landing,
+        speed: bounds.speed(out_level),
+        speed_step: out_level,
+        ball: *ball,
+        target,
+        converged,
+        search: p,
+        level,
+        jacobian: jac,
+        tries: tries + flown,
+        flights: budget - left,
+        settled,
+        best: if converged { None } else { best },
+    }
 }
 
 #[cfg(test)]
@@ -369,7 +403,7 @@ mod tests {
     fn the_aimed_return_lands_on_the_target_in_the_full_physics() {
         let (bounds, target, prop, racket) = cell();
         for b in balls() {
-            let a = aim(&bounds, target, &prop, &racket, &b, tilt0(&b), None);
+            let a = aim(&bounds, target, &prop, &racket, &b, tilt0(&b), None, 64);
             assert!(a.converged, "{a:?} for {b:?}");
             // Fly it with the propagator itself (4 ms, events): it clears the
             // net and bounces within 5 cm of the target.
@@ -390,8 +424,8 @@ mod tests {
     fn topspin_gets_a_closed_face_backspin_an_open_one_and_a_faster_bat() {
         let (bounds, target, prop, racket) = cell();
         let b = balls();
-        let top = aim(&bounds, target, &prop, &racket, &b[0], tilt0(&b[0]), None);
-        let back = aim(&bounds, target, &prop, &racket, &b[1], tilt0(&b[1]), None);
+        let top = aim(&bounds, target, &prop, &racket, &b[0], tilt0(&b[0]), None, 64);
+        let back = aim(&bounds, target, &prop, &racket, &b[1], tilt0(&b[1]), None, 64);
         assert!(
             top.tilt < -0.3 && back.tilt > 0.3,
             "top {:.1}°, back {:.1}°",
@@ -402,8 +436,8 @@ mod tests {
         assert!(top.speed < back.speed, "{top:?} {back:?}");
         // A ball on the +y side is sent back towards the middle: the face
         // turns towards −y (ψ > 0), and from −y towards +y.
-        let plus = aim(&bounds, target, &prop, &racket, &b[3], tilt0(&b[3]), None);
-        let minus = aim(&bounds, target, &prop, &racket, &b[4], tilt0(&b[4]), None);
+        let plus = aim(&bounds, target, &prop, &racket, &b[3], tilt0(&b[3]), None, 64);
+        let minus = aim(&bounds, target, &prop, &racket, &b[4], tilt0(&b[4]), None, 64);
         assert!(plus.heading > 0.0 && minus.heading < 0.0, "{plus:?} {minus:?}");
     }
 
@@ -411,14 +445,42 @@ mod tests {
     fn a_refinement_starts_from_the_last_aim() {
         let (bounds, target, prop, racket) = cell();
         let b = balls()[0];
-        let first = aim(&bounds, target, &prop, &racket, &b, tilt0(&b), None);
+        let first = aim(&bounds, target, &prop, &racket, &b, tilt0(&b), None, 64);
         let mut moved = b;
         moved.pos.z += 0.01;
         moved.vel.x += 0.05;
-        let again = aim(&bounds, target, &prop, &racket, &moved, tilt0(&moved), Some(&first));
+        let again = aim(&bounds, target, &prop, &racket, &moved, tilt0(&moved), Some(&first), AIM_BUDGET);
         assert!(again.converged);
         assert!((again.tilt - first.tilt).abs() < 0.05);
         assert_eq!(again.speed_step, first.speed_step);
+    }
+
+    #[test]
+    fn fly_is_the_propagators_flight() {
+        let (_, _, prop, _) = cell();
+        let s = BallState::new(Vec3::new(1.6, 0.1, 0.3), Vec3::new(-6.5, -0.3, 1.5), Vec3::new(0.0, -150.0, 40.0));
+        let l = fly(&prop, &s).unwrap();
+        let (mut e, mut t) = (s, 0.0);
+        let ev = prop.advance(&mut e, &mut t, &StopAt { t_max: 2.0, hit_plane_x: None, net: false });
+        let Event::Bounce { before, .. } = ev else { panic!("{ev:?}") };
+        assert!((l.x - before.pos.x).hypot(l.y - before.pos.y) < 0.01, "{l:?} vs {:?}", before.pos);
+        assert!(l.over_net > 0.0);
+    }
+
+    #[test]
+    fn a_plan_flies_at_most_its_budget() {
+        let (bounds, target, prop, racket) = cell();
+        let mut warm = None;
+        for b in balls() {
+            for k in 0..6 {
+                let mut s = b;
+                s.spin *= 1.0 + 0.02 * k as f64;
+                let a = aim(&bounds, target, &prop, &racket, &s, tilt0(&s), warm.as_ref(), AIM_BUDGET);
+                assert!(a.flights <= AIM_BUDGET, "{a:?}");
+                warm = Some(a);
+            }
+            warm = None;
+        }
     }
 
     #[test]
@@ -426,7 +488,7 @@ mod tests {
         let (bounds, target, prop, racket) = cell();
         // Heavy backspin, slow and low: wants more than the bounds give.
         let b = BallState::new(Vec3::new(1.6, 0.0, 0.16), Vec3::new(2.0, 0.0, -1.0), Vec3::new(0.0, -900.0, 0.0));
-        let a = aim(&bounds, target, &prop, &racket, &b, tilt0(&b), None);
+        let a = aim(&bounds, target, &prop, &racket, &b, tilt0(&b), None, 64);
         assert!(a.tilt >= bounds.tilt.0 && a.tilt <= bounds.tilt.1, "{a:?}");
         assert!(a.heading.abs() <= MAX_HEADING && a.speed <= bounds.speed.1, "{a:?}");
     }

@@ -553,7 +553,16 @@ impl Estimator {
                 let tilt0 = -stroke::paper_beta(&self.strike, &spin);
                 let target = self.strike.aim_target;
                 let warm = track.aim.as_ref();
-                let a = aim::aim(&self.aim_bounds, target, &track.prop, &self.racket, &hit.state, tilt0, warm);
+                let a = aim::aim(
+                    &self.aim_bounds,
+                    target,
+                    &track.prop,
+                    &self.racket,
+                    &hit.state,
+                    tilt0,
+                    warm,
+                    aim::AIM_BUDGET,
+                );
                 track.aim = Some(a);
                 let roll = stroke::bat_roll(&self.strike, hit.state.pos.y);
                 (

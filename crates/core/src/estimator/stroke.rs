@@ -36,7 +36,7 @@ pub enum Withheld {
 
 /// The paper's β for spin ω_y, rad (positive closes the face): +β_top at
 /// ω_y = +ω_ref, β_back at −ω_ref, linear between, clamped.
-pub(crate) fn paper_beta(cal: &StrikeCalib, spin: &Vec3) -> f64 {
+pub fn paper_beta(cal: &StrikeCalib, spin: &Vec3) -> f64 {
     let u = (spin.y / cal.spin_ref).clamp(-1.0, 1.0);
     let (top, back) = (cal.beta_topspin_deg.to_radians(), cal.beta_backspin_deg.to_radians());
     0.5 * (top + back) + 0.5 * (top - back) * u
