@@ -171,7 +171,7 @@ impl BatPath {
     fn rates(&self, i: usize) -> (Vec3, Vec3) {
         let (lo, hi) = (i.saturating_sub(1), (i + 1).min(self.t.len() - 1));
         let dt = self.t[hi].secs_since(self.t[lo]);
-        if !(dt > 0.0) {
+        if dt <= 0.0 || dt.is_nan() {
             return (Vec3::zeros(), Vec3::zeros());
         }
         let v = (self.centre[hi] - self.centre[lo]) / dt;

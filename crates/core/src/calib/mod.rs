@@ -369,6 +369,30 @@ mod tests {
     }
 
     #[test]
+    fn files_from_before_the_racket_and_the_aim_still_load() {
+        let p = Path::new("physics.toml");
+        let old_physics = &DEFAULT_PHYSICS[..DEFAULT_PHYSICS.find("[racket]").expect("the shipped file has it")];
+        let old_strike: String =
+            DEFAULT_STRIKE.lines().filter(|l| !l.starts_with("aim")).map(|l| format!("{l}\n")).collect();
+        let c = Calibration::from_texts((old_physics, p), (DEFAULT_TABLE, p), (&old_strike, p), (DEFAULT_ROBOT, p))
+            .unwrap();
+        assert_eq!(c.racket, RacketParams::default());
+        assert_eq!(c.racket, Calibration::default_cell().racket, "the shipped [racket] is the default rubber");
+        assert_eq!(c.strike.aim, AimMode::Landing);
+        assert_eq!(c.strike, Calibration::default_cell().strike);
+        // A bad rubber or aim is named.
+        let bad = DEFAULT_PHYSICS.replace("friction = 0.65", "friction = -0.1");
+        let e = Calibration::from_texts((&bad, p), (DEFAULT_TABLE, p), (DEFAULT_STRIKE, p), (DEFAULT_ROBOT, p));
+        assert!(e.unwrap_err().to_string().contains("racket.friction"));
+        let bad = DEFAULT_STRIKE.replace("aim_bat_speed = [0.5, 2.0]", "aim_bat_speed = [0.5, 3.0]");
+        let e = Calibration::from_texts((DEFAULT_PHYSICS, p), (DEFAULT_TABLE, p), (&bad, p), (DEFAULT_ROBOT, p));
+        assert!(e.unwrap_err().to_string().contains("strike.aim_bat_speed"));
+        let bad = DEFAULT_STRIKE.replace("aim_target = [-0.70, 0.0]", "aim_target = [0.70, 0.0]");
+        let e = Calibration::from_texts((DEFAULT_PHYSICS, p), (DEFAULT_TABLE, p), (&bad, p), (DEFAULT_ROBOT, p));
+        assert!(e.unwrap_err().to_string().contains("strike.aim_target"));
+    }
+
+    #[test]
     fn a_bad_value_is_named() {
         let dir = std::env::temp_dir().join(format!("topspin-calib-test-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();

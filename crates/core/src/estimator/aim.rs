@@ -297,7 +297,7 @@ pub fn aim(
         let slope = j[0][0];
         let d = if slope.abs() <= LOB_SLOPE && res[0] > 0.0 {
             [0.0, 0.0]
-        } else if slope > -LOB_SLOPE || !(det.abs() > 1e-9) {
+        } else if slope > -LOB_SLOPE || det.abs() <= 1e-9 || det.is_nan() {
             [-MAX_STEP, if j[1][1].abs() > 1e-9 { (-res[1] / j[1][1]).clamp(-MAX_STEP, MAX_STEP) } else { 0.0 }]
         } else {
             [

@@ -165,7 +165,7 @@ impl RacketModel {
         let n = normal;
         let u = ball.vel - surface_vel;
         let u_n = u.dot(n);
-        if !(u_n < 0.0) {
+        if u_n >= 0.0 || u_n.is_nan() {
             return None;
         }
         let e = (p.restitution - p.restitution_slope * -u_n).clamp(0.0, 1.0);
