@@ -133,27 +133,30 @@ impl Sensor {
 /// The mock's counters without its path.
 fn brief(r: &MockResult) -> String {
     format!(
-        "cycles {} late {} wrong_ipoc {} poscorr_clamped {} robot_limited {} stopped_by_limit {} stopped_by_monitor {} \
-         reordered {} answers_after_cycle {}",
+        "cycles {} late {} wrong_ipoc {} poscorr_clamped {} rates_over {} stopped_by_limit {} stopped_by_monitor {} \
+         reordered {} answers_after_cycle {} stopped {:?}",
         r.cycles,
         r.late,
         r.wrong_ipoc,
         r.poscorr_clamped,
-        r.robot_limited,
+        r.rates_over,
         r.stopped_by_limit,
         r.stopped_by_monitor,
         r.reordered,
-        r.answers_after_cycle
+        r.answers_after_cycle,
+        r.stopped.map(|s| s.to_string())
     )
 }
 
 /// Nothing the sensor answered drove the robot past a limit. A late cycle
-/// (the correction held, then resumed) is a velocity step the robot model
-/// smooths (`robot_limited`): only asked for where no cycle was late.
+/// (the correction held, then resumed) is a velocity step the axes take
+/// through their lag, possibly over their acceleration (`rates_over`):
+/// only asked for where no cycle was late.
 fn within_limits(r: &MockResult) {
     assert_eq!(r.poscorr_clamped, 0, "{}", brief(r));
+    assert!(r.stopped.is_none(), "{}", brief(r));
     if r.late == 0 {
-        assert_eq!(r.robot_limited, 0, "{}", brief(r));
+        assert_eq!(r.rates_over, 0, "{}", brief(r));
     }
     assert!(!r.stopped_by_monitor, "{}", brief(r));
     assert!(!r.stopped_by_limit, "{}", brief(r));

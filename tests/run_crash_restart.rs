@@ -7,10 +7,10 @@
 //! "Mid-stroke" is read from the daemon's own log: the signal goes out on
 //! the first `PhaseChanged(Approach)` (the bat leaving home for a ball).
 //!
-//! Limits: no POSCORR clamp and no monitor stop. The mock's `robot_limited`
+//! Limits: no POSCORR clamp and no monitor stop. The mock's `rates_over`
 //! is not asserted here: on this shared machine some answers are late (the
 //! mock CLI keeps the controller's deadline), and a held-then-resumed
-//! correction is a velocity step the mock's robot model smooths — that is
+//! correction is a velocity step the axes take through their lag — that is
 //! lateness, tested in tests/rsi_faults.rs, not a command out of bounds.
 
 #![allow(clippy::disallowed_methods)] // a process test: it waits on the wall clock

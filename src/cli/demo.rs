@@ -13,6 +13,11 @@ pub struct DemoArgs {
     /// Number of launcher balls (cycling through the nine settings).
     #[arg(long, default_value_t = 9)]
     pub balls: usize,
+    /// Command the robot as if it had no dead time and lag (the mock KR C4
+    /// still has them: calib/robot.toml [servo]), to see what the
+    /// compensation is worth.
+    #[arg(long)]
+    pub no_lag_comp: bool,
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
     /// Tracker noise per axis, mm.
@@ -74,6 +79,7 @@ pub fn run(a: DemoArgs) -> anyhow::Result<()> {
     }
     let cal = Calibration::default_cell();
     let mut runtime = topspin_daemon::runtime::daemon::RuntimeConfig::loopback();
+    runtime.servo_compensation = !a.no_lag_comp;
     if let Some(method) = a.logo {
         runtime.logo = Some(topspin_daemon::runtime::daemon::LogoRuntime {
             bind: "127.0.0.1:0".parse().expect("literal"),
@@ -260,11 +266,24 @@ pub fn table(r: &DemoReport) -> String {
             i.clock_jumps
         );
     }
+    let rb = &r.robot;
     let _ = writeln!(
         out,
-        "mock KR C4: {} POSCORR clamps, {} limited by the robot, monitor stop: {}",
-        r.poscorr_clamped, r.robot_limited, r.stopped_by_monitor
+        "robot: dead time {:.0} ms, lag {:.0} ms, compensation {}; axes peaked at {:.0} % of their speed, {:.0} % of \
+         their acceleration ({} cycles over a limit); {} POSCORR clamps; stopped: {}",
+        rb.dead_time_ms,
+        rb.lag_ms,
+        if rb.compensation { "on" } else { "off" },
+        rb.peak_speed_share * 100.0,
+        rb.peak_acceleration_share * 100.0,
+        rb.rates_over,
+        r.poscorr_clamped,
+        rb.stop_reason.as_deref().unwrap_or("no"),
     );
+    if !rb.skipped.is_empty() {
+        let list: Vec<String> = rb.skipped.iter().map(|(k, n)| format!("{k} {n}")).collect();
+        let _ = writeln!(out, "balls skipped by the planner: {}", list.join(", "));
+    }
     for w in &r.warnings {
         let _ = writeln!(out, "warning: {w}");
     }

@@ -55,6 +55,13 @@ pub struct MockKrcArgs {
     pub reorder: f64,
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// The robot's dead time, ms, whole cycles (default: calib/robot.toml
+    /// [servo] dead_time_ms).
+    #[arg(long)]
+    pub dead_time_ms: Option<f64>,
+    /// The axes' first-order lag, ms (default: [servo] lag_ms).
+    #[arg(long)]
+    pub lag_ms: Option<f64>,
     /// Write the TCP path here (CSV).
     #[arg(long)]
     pub csv: Option<PathBuf>,
@@ -85,6 +92,13 @@ pub fn run(a: MockKrcArgs) -> anyhow::Result<()> {
     }
     let mut robot = calib.robot.clone();
     robot.rsi.cycle_ms = a.cycle_ms;
+    if let Some(d) = a.dead_time_ms {
+        robot.servo.dead_time_ms = d;
+    }
+    if let Some(l) = a.lag_ms {
+        robot.servo.lag_ms = l;
+    }
+    robot.validate().map_err(|e| BadInput(format!("--dead-time-ms/--lag-ms/--cycle-ms: {} = {}", e.key, e.value)))?;
     let mut cfg = MockKrcConfig::from_files(&eth, &ctx, &robot, a.mode, 1.02);
     cfg.bind = a.bind;
     if let Some(to) = a.to {
@@ -109,15 +123,18 @@ pub fn run(a: MockKrcArgs) -> anyhow::Result<()> {
     let stop = AtomicBool::new(false);
     let r = topspin_sim::mock_krc::run(&cfg, &stop).context("mock KR C4")?;
     println!(
-        "cycles {} late {} stopped_by_limit {} stopped_by_monitor {} wrong_ipoc {} poscorr_clamped {} robot_limited {} max_answer_delay_us {}",
+        "cycles {} late {} stopped_by_limit {} stopped_by_monitor {} wrong_ipoc {} poscorr_clamped {} max_answer_delay_us {} \
+         peak_axis_speed {:.0}% peak_axis_acceleration {:.0}% stopped: {}",
         r.cycles,
         r.late,
         r.stopped_by_limit,
         r.stopped_by_monitor,
         r.wrong_ipoc,
         r.poscorr_clamped,
-        r.robot_limited,
-        r.max_answer_delay.0 / 1000
+        r.max_answer_delay.0 / 1000,
+        r.peak_speed_share * 100.0,
+        r.peak_acceleration_share * 100.0,
+        r.stopped.map_or("no".to_owned(), |s| s.to_string()),
     );
     if let Some(p) = a.csv {
         r.write_csv(&p).with_context(|| format!("writing {}", p.display()))?;

@@ -5,13 +5,16 @@
 use clap::{Parser, Subcommand};
 
 pub mod bench;
+pub mod calibrate;
 pub mod check;
 pub mod crops;
 pub mod demo;
+pub mod doctor;
 pub mod eval;
 pub mod eval_paper;
 pub mod eval_real;
 pub mod fit;
+pub mod identify;
 pub mod logo;
 pub mod logo_cnn;
 pub mod mock_krc;
@@ -67,6 +70,24 @@ pub enum Command {
     /// Commissioning checks: `check tracker` listens on the tracker port.
     #[command(subcommand)]
     Check(check::CheckCommand),
+    /// Measure the robot's dead time and servo lag over RSI: a few mm of
+    /// excitation from home, fitted from RIst; prints the `[servo]` lines
+    /// for calib/robot.toml.
+    ///
+    /// Example: `topspin identify --axis all --amplitude-mm 3` (T1, reduced
+    /// override; see rsi/README.md), then select and start topspin_rsi.src.
+    Identify(identify::IdentifyArgs),
+    /// Calibration from measurements: `calibrate cell` finds the table in
+    /// the robot's BASE from touch points.
+    ///
+    /// Example: `topspin calibrate cell --points touches.csv --write calib`.
+    #[command(subcommand)]
+    Calibrate(calibrate::CalibrateCommand),
+    /// Is this PC ready for the 4 ms RSI loop? Kernel, cores, rights, NIC,
+    /// swap, time sync and a wake-up jitter probe on the RSI core.
+    ///
+    /// Example: `topspin doctor --config /etc/topspin/topspin.toml`.
+    Doctor(doctor::DoctorArgs),
 }
 
 /// Offline commands end quietly when their reader goes away
@@ -82,10 +103,33 @@ fn die_quietly_on_a_closed_pipe() {
     }
 }
 
+/// A command line clap cannot parse: one line and exit 2 (DESIGN §8);
+/// help, version and a missing subcommand print as clap prints them.
+fn usage_error(e: clap::Error) -> i32 {
+    use clap::error::ErrorKind;
+    if matches!(
+        e.kind(),
+        ErrorKind::DisplayHelp | ErrorKind::DisplayVersion | ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand
+    ) {
+        e.exit();
+    }
+    let rendered = e.render().to_string();
+    let mut lines = rendered.lines().map(str::trim).filter(|l| !l.is_empty() && !l.starts_with("For more information"));
+    let first = lines.next().unwrap_or("bad command line").trim_start_matches("error: ");
+    match lines.find(|l| l.starts_with('[') || l.starts_with("tip:")) {
+        Some(extra) => eprintln!("topspin: {first} {extra}"),
+        None => eprintln!("topspin: {first}"),
+    }
+    EXIT_BAD_INPUT
+}
+
 /// Runs the command line; returns the process exit code.
 pub fn main() -> i32 {
-    let cli = Cli::parse();
-    if !matches!(cli.command, Command::Run(_) | Command::MockKrc(_)) {
+    let cli = match Cli::try_parse() {
+        Ok(c) => c,
+        Err(e) => return usage_error(e),
+    };
+    if !matches!(cli.command, Command::Run(_) | Command::MockKrc(_) | Command::Identify(_)) {
         die_quietly_on_a_closed_pipe();
     }
     let result = match cli.command {
@@ -100,6 +144,9 @@ pub fn main() -> i32 {
         Command::Logo(a) => logo::run(a),
         Command::Replay(a) => replay::run(a),
         Command::Check(c) => check::run(c),
+        Command::Identify(a) => identify::run(a),
+        Command::Doctor(a) => doctor::run(a),
+        Command::Calibrate(c) => calibrate::run(c),
     };
     match result {
         Ok(()) => 0,

@@ -65,6 +65,7 @@ pub fn runtime_config(c: &DaemonConfig) -> Result<RuntimeConfig, BadInput> {
         log_interval_s: c.telemetry.log_interval_s,
         record_rsi: c.recording.enabled,
         logo: logo_runtime(c)?,
+        servo_compensation: c.rsi.servo_compensation,
     })
 }
 

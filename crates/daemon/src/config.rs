@@ -178,6 +178,14 @@ pub struct TrackerConfig {
 pub struct RsiConfig {
     /// `Type` of `<Sen>`: SENTYPE of the controller's Ethernet configuration.
     pub sentype: String,
+    /// Compensate the robot's dead time and lag (`calib/robot.toml`
+    /// `[servo]`): command ahead, feed the lag forward.
+    #[serde(default = "yes")]
+    pub servo_compensation: bool,
+}
+
+fn yes() -> bool {
+    true
 }
 
 /// `[telemetry]`: logs and counters.
@@ -301,7 +309,7 @@ impl Default for DaemonConfig {
                 rsi_wait: RsiWait::Blocking,
             },
             tracker: TrackerConfig { noise_mm: 2.0, fixed_latency_ms: 2.0 },
-            rsi: RsiConfig { sentype: "ImFree".to_owned() },
+            rsi: RsiConfig { sentype: "ImFree".to_owned(), servo_compensation: true },
             telemetry: TelemetryConfig { log_interval_s: 10.0, log_level: "info".to_owned() },
             recording: RecordingConfig { enabled: false, dir: PathBuf::from("/var/lib/topspin") },
             viewer: ViewerConfig::default(),

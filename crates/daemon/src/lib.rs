@@ -8,19 +8,26 @@
 //! - [`clock`]: the only place that reads the clock.
 //! - [`runtime`]: the daemon's threads, real-time set-up and telemetry.
 //! - [`rsi_server`]: the sensor-side UDP loop around the RSI session.
+//! - [`rsi_identify`]: the UDP loop of `topspin identify` around the
+//!   sans-IO identifier.
 //! - [`config`]: the layered, validated configuration.
 //! - [`systemd`]: readiness and watchdog notifications.
 //! - [`record`]: session recording (MCAP) and bit-exact replay.
 //! - [`channels`]: the topics and schemas the recording and the view share.
 //! - [`viewer`]: the Foxglove view, live and from a recording.
 //! - [`tracker_check`]: what the tracker sends (`topspin check tracker`).
+//! - [`doctor`]: is this PC ready for the 4 ms loop (`topspin doctor`).
+//! - [`touch`]: the RSI listener that reads touch points (`topspin calibrate cell --rsi`).
 
 pub mod channels;
 pub mod clock;
 pub mod config;
+pub mod doctor;
 pub mod record;
+pub mod rsi_identify;
 pub mod rsi_server;
 pub mod runtime;
 pub mod systemd;
+pub mod touch;
 pub mod tracker_check;
 pub mod viewer;

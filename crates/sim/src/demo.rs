@@ -169,13 +169,36 @@ pub struct DemoReport {
     pub ingest: IngestCounters,
     /// What the tracker fault injector did (`None`: a clean stream).
     pub tracker_faults: Option<InjectedCounts>,
-    /// Corrections the mock KR C4 had to clamp (POSCORR) or slow down to
-    /// the robot's limits, and whether its monitor stopped RSI: all zero
-    /// and false unless the daemon commanded something out of bounds.
+    /// Corrections the mock KR C4 had to clamp (POSCORR), and whether its
+    /// monitor stopped RSI: zero and false unless the daemon commanded
+    /// something out of bounds.
     pub poscorr_clamped: u64,
-    pub robot_limited: u64,
     pub stopped_by_monitor: bool,
+    /// The robot: its servo, whether the daemon compensated it, how it
+    /// stopped (if it did) and the balls the planner skipped.
+    pub robot: RobotReport,
     pub per_ball: Vec<BallVerdict>,
+}
+
+/// What the robot did in a demo.
+#[derive(Clone, Debug, Serialize)]
+pub struct RobotReport {
+    /// The mock's dead time and lag (`calib/robot.toml` `[servo]`).
+    pub dead_time_ms: f64,
+    pub lag_ms: f64,
+    /// The daemon compensated them.
+    pub compensation: bool,
+    /// Controller stops (0 or 1: RSI ends with the first) and why.
+    pub stops: u64,
+    pub stop_reason: Option<String>,
+    /// Balls whose stroke the planner refused, by reason.
+    pub skipped: std::collections::BTreeMap<String, u64>,
+    /// The fastest and hardest any axis moved, as shares of its limits,
+    /// and the cycles with an axis over either (the mock counts them; a
+    /// KR C4 would stop).
+    pub peak_speed_share: f64,
+    pub peak_acceleration_share: f64,
+    pub rates_over: u64,
 }
 
 /// The ball's true hitting point lies in the hitting window.
@@ -198,7 +221,7 @@ pub struct LoopbackRun {
 /// Runs the demo end to end and judges every stroke.
 pub fn run(cfg: &DemoConfig, cal: &Calibration) -> std::io::Result<DemoReport> {
     let r = run_loopback(cfg, cal)?;
-    let mut report = judge(cal, &r.balls, &r.starts, r.t0, &r.mock, &r.daemon);
+    let mut report = judge(cal, cfg.runtime.servo_compensation, &r.balls, &r.starts, r.t0, &r.mock, &r.daemon);
     report.tracker_faults = r.injected;
     Ok(report)
 }
@@ -369,6 +392,7 @@ fn matching_plan(plans: &[StrikePlan], t_hit: Instant) -> Option<&StrikePlan> {
 
 fn judge(
     cal: &Calibration,
+    compensation: bool,
     balls: &[SimBall],
     starts: &[f64],
     t0: Instant,
@@ -411,8 +435,18 @@ fn judge(
         ingest: summary.ingest,
         tracker_faults: None,
         poscorr_clamped: mock.poscorr_clamped,
-        robot_limited: mock.robot_limited,
         stopped_by_monitor: mock.stopped_by_monitor,
+        robot: RobotReport {
+            dead_time_ms: cal.robot.servo.dead_time_ms,
+            lag_ms: cal.robot.servo.lag_ms,
+            compensation,
+            stops: mock.stopped.is_some() as u64,
+            stop_reason: mock.stopped.map(|r| r.to_string()),
+            skipped: summary.telemetry.skipped.clone(),
+            peak_speed_share: mock.peak_speed_share,
+            peak_acceleration_share: mock.peak_acceleration_share,
+            rates_over: mock.rates_over,
+        },
         per_ball,
     }
 }

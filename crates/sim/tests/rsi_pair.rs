@@ -42,7 +42,8 @@ fn pair(session_ms: u32, controller_ms: u32, faults: Faults, late_limit: u64) ->
 /// Nothing the sensor answered drove the robot past a limit.
 fn within_limits(r: &MockResult) {
     assert_eq!(r.poscorr_clamped, 0, "{r:?}");
-    assert_eq!(r.robot_limited, 0, "the robot's own limiter acted");
+    assert!(r.stopped.is_none(), "the controller stopped: {:?}", r.stopped.map(|s| s.to_string()));
+    assert_eq!(r.rates_over, 0, "an axis ran over its speed or acceleration");
     assert!(!r.stopped_by_monitor && !r.stopped_by_limit);
 }
 

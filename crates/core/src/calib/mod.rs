@@ -5,6 +5,7 @@
 use std::path::{Path, PathBuf};
 
 pub mod camera;
+pub mod cell;
 
 use serde::{Deserialize, Serialize};
 
@@ -224,6 +225,23 @@ impl Calibration {
         let strike = read_or_default(dir, "strike.toml", DEFAULT_STRIKE)?;
         let robot = read_or_default(dir, "robot.toml", DEFAULT_ROBOT)?;
         Self::from_texts((&physics.0, &physics.1), (&table.0, &table.1), (&strike.0, &strike.1), (&robot.0, &robot.1))
+    }
+
+    /// Loads `dir` as [`load`](Self::load) does, with `robot_text` in place
+    /// of its `robot.toml` (errors name `dir/robot.toml`): how a new
+    /// `robot.toml` is checked against the rest of the cell before it
+    /// replaces the old one.
+    pub fn load_with_robot(dir: Option<&Path>, robot_text: &str) -> Result<Self, CalibError> {
+        let physics = read_or_default(dir, "physics.toml", DEFAULT_PHYSICS)?;
+        let table = read_or_default(dir, "table.toml", DEFAULT_TABLE)?;
+        let strike = read_or_default(dir, "strike.toml", DEFAULT_STRIKE)?;
+        let robot_path = dir.map_or_else(|| PathBuf::from("<default>/robot.toml"), |d| d.join("robot.toml"));
+        Self::from_texts(
+            (&physics.0, &physics.1),
+            (&table.0, &table.1),
+            (&strike.0, &strike.1),
+            (robot_text, &robot_path),
+        )
     }
 
     /// Parses and validates the four files' texts (each with the path its

@@ -41,6 +41,49 @@ pub struct RobotFile {
     pub poscorr: PosCorrLimits,
     /// `[rsi]`: RSI timing.
     pub rsi: RsiTiming,
+    /// `[servo]`: how the axes follow a correction (files written before
+    /// it existed get the compiled-in assumption).
+    #[serde(default = "ServoModel::compiled_in")]
+    pub servo: ServoModel,
+}
+
+/// How the robot's axes follow a correction, beyond RSI's own cycle: the
+/// commanded pose reaches the drives `dead_time_ms` after the cycle that
+/// would have it in place (whole cycles), then each axis follows it with a
+/// first-order lag of time constant `lag_ms`. Identified on the robot
+/// (`topspin identify`); simulated by the mock KR C4 and compensated by
+/// the RSI session.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ServoModel {
+    /// Dead time, ms (a multiple of `rsi.cycle_ms`).
+    pub dead_time_ms: f64,
+    /// First-order lag time constant, ms.
+    pub lag_ms: f64,
+}
+
+impl ServoModel {
+    /// The `[servo]` of the compiled-in `calib/robot.toml`.
+    pub fn compiled_in() -> Self {
+        let file: RobotFile = toml::from_str(super::DEFAULT_ROBOT).expect("compiled-in calibration is valid (tested)");
+        file.servo
+    }
+
+    /// The dead time in whole cycles of `cycle_ms`.
+    pub fn dead_time_cycles(&self, cycle_ms: u32) -> u32 {
+        (self.dead_time_ms / cycle_ms as f64).round().max(0.0) as u32
+    }
+
+    /// The lag's time constant, s.
+    pub fn lag_s(&self) -> f64 {
+        self.lag_ms * 1e-3
+    }
+}
+
+/// The share of its gap a first-order lag of time constant `lag_s` closes
+/// in a cycle of `dt` s, α = 1 − e^(−dt/τ) (1 without a lag).
+pub fn lag_step(dt: f64, lag_s: f64) -> f64 {
+    if lag_s > 0.0 { 1.0 - (-dt / lag_s).exp() } else { 1.0 }
 }
 
 /// The arm and its bat.
@@ -198,6 +241,11 @@ pub struct BadKey {
     pub value: f64,
 }
 
+/// The longest dead time `[servo]` may name, ms.
+pub const MAX_DEAD_TIME_MS: f64 = 100.0;
+/// The longest lag `[servo]` may name, ms.
+pub const MAX_LAG_MS: f64 = 200.0;
+
 fn positive(key: &'static str, v: &[f64]) -> Result<(), BadKey> {
     for &value in v {
         if !(value.is_finite() && value > 0.0) {
@@ -339,6 +387,16 @@ impl RobotFile {
         if !(rs.follow_through_s.is_finite() && (0.0..=1.0).contains(&rs.follow_through_s)) {
             return Err(BadKey { key: "rsi.follow_through_s", value: rs.follow_through_s });
         }
+        let sv = &self.servo;
+        let cycles = sv.dead_time_ms / rs.cycle_ms as f64;
+        if !(sv.dead_time_ms.is_finite() && (0.0..=MAX_DEAD_TIME_MS).contains(&sv.dead_time_ms))
+            || (cycles - cycles.round()).abs() > 1e-6
+        {
+            return Err(BadKey { key: "servo.dead_time_ms (whole cycles, 0-100 ms)", value: sv.dead_time_ms });
+        }
+        if !(sv.lag_ms.is_finite() && (0.0..=MAX_LAG_MS).contains(&sv.lag_ms)) {
+            return Err(BadKey { key: "servo.lag_ms (0-200 ms)", value: sv.lag_ms });
+        }
         Ok(())
     }
 
@@ -418,6 +476,27 @@ mod tests {
 
     fn default_file() -> RobotFile {
         toml::from_str(include_str!("../../../../calib/robot.toml")).unwrap()
+    }
+
+    #[test]
+    fn servo_is_whole_cycles_and_bounded_and_old_files_get_the_assumption() {
+        let f = default_file();
+        assert_eq!(f.servo.dead_time_cycles(f.rsi.cycle_ms), 3);
+        assert!((f.servo.lag_s() - 0.015).abs() < 1e-12);
+        for (dead, lag, key) in [
+            (10.0, 15.0, "servo.dead_time_ms (whole cycles, 0-100 ms)"),
+            (-4.0, 15.0, "servo.dead_time_ms (whole cycles, 0-100 ms)"),
+            (f64::NAN, 15.0, "servo.dead_time_ms (whole cycles, 0-100 ms)"),
+            (12.0, -1.0, "servo.lag_ms (0-200 ms)"),
+            (12.0, f64::INFINITY, "servo.lag_ms (0-200 ms)"),
+        ] {
+            let mut g = f.clone();
+            g.servo = ServoModel { dead_time_ms: dead, lag_ms: lag };
+            assert_eq!(g.validate().unwrap_err().key, key, "{dead} {lag}");
+        }
+        let text = include_str!("../../../../calib/robot.toml");
+        let old: RobotFile = toml::from_str(&text[..text.find("[servo]").unwrap()]).unwrap();
+        assert_eq!(old.servo, f.servo);
     }
 
     #[test]

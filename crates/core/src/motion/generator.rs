@@ -2,16 +2,27 @@
 //! bat velocity, follow through, return home — one setpoint per cycle,
 //! re-planned online whenever a refined plan arrives.
 //!
-//! It uses Ruckig (`rsruckig`, the field-standard online trajectory
-//! generator): from the current commanded state (position, velocity,
-//! acceleration) to a target state under per-axis velocity, acceleration
-//! and jerk limits, with all six axes time-synchronised. The hitting time is
-//! met with Ruckig's `minimum_duration`: the time-optimal profile is
-//! stretched to end exactly at the hit. If the hit cannot be reached in time
-//! the profile ends as early as the limits allow and the lateness is
-//! reported ([`StrokeGenerator::late_by`]). Re-planning starts from the
-//! state the last setpoint was sampled from, so the commanded path stays
-//! continuous in velocity and acceleration across plan changes.
+//! The stroke is planned in the KR 6 R900's joint space, where the robot's
+//! limits are: the hitting pose and the bat velocity become a joint target
+//! (the inverse kinematics nearest the current joints, so the
+//! configuration stays continuous, and the joint velocity that gives the
+//! bat velocity), and Ruckig (`rsruckig`, the field-standard online
+//! trajectory generator) moves all six axes, time-synchronised, within
+//! [`JOINT_LIMIT_FRACTION`] of each axis's speed and acceleration (jerk:
+//! full acceleration in [`JERK_RAMP_S`]). No stroke can ask an axis for
+//! more than it has, pass a software limit switch on the way (the limits
+//! are checked at the target; the path between two in-limit joint vectors
+//! stays within them), or sweep through a singularity at speed. Each
+//! setpoint is the forward kinematics of the sampled joints: a TCP pose in
+//! B, as RSI's POSCORR wants it.
+//!
+//! The hitting time is met with Ruckig's `minimum_duration`: the
+//! time-optimal profile is stretched to end exactly at the hit. If the hit
+//! cannot be reached in time the profile ends as early as the limits
+//! allow and the lateness is reported ([`StrokeGenerator::late_by`]); a
+//! new ball's stroke later than [`MAX_LATE_S`] is refused. Re-planning
+//! starts from the state the last setpoint was sampled from, so the joint
+//! path stays continuous in velocity and acceleration across plan changes.
 //!
 //! Ruckig is only asked to calculate when the target changes (a new plan,
 //! or a phase change); other cycles sample the stored trajectory. With six
@@ -22,14 +33,19 @@
 //! Plans are checked here: non-finite values, a hit in the past or too far
 //! ahead, or a hit far outside the workspace are rejected; a hit slightly
 //! outside is pulled in (with room to brake from the bat velocity), the bat
-//! speed and orientation are clamped to the cell's limits.
+//! speed and orientation are clamped to the cell's limits; a hitting pose
+//! with no joint solution within the software limits, at the singular
+//! wrist, or whose bat velocity the axes cannot reach is refused or slowed
+//! (the reason: [`PlanRejected::key`]). Follow-through and return run at
+//! [`CALM_LIMIT_FRACTION`] of the joint limits.
 
 #![allow(clippy::needless_range_loop)] // parallel per-axis arrays
 
 use rsruckig::prelude::*;
 
-use super::limits::GENERATOR_LIMIT_FRACTION;
+use super::limits::unwrap_near;
 use super::{MotionLimits, Pose6};
+use crate::kinematics::{AXES, Joints, LimitKind, LimitViolation, Pose, Unreachable};
 use crate::plan::StrikePlan;
 use crate::time::Instant;
 
@@ -56,6 +72,27 @@ pub(crate) const KEEP_MAX_DP_M: f64 = 0.15;
 pub(crate) const BALL_SPEED_AT_HIT: f64 = 4.0;
 /// Duration nudges tried when Ruckig misses the hitting time, s.
 const RETRY_NUDGES_S: [f64; 4] = [-0.0003, 0.0003, -0.0007, 0.0007];
+/// Share of each axis's speed and acceleration a stroke may use (the rest
+/// absorbs the lag's feed-forward and the refinements to come).
+pub const JOINT_LIMIT_FRACTION: f64 = 0.97;
+/// Time for an axis to reach full acceleration (sets the jerk limit), s.
+pub const JERK_RAMP_S: f64 = 0.0125;
+/// Share of the stroke's limits for follow-through and return.
+pub const CALM_LIMIT_FRACTION: f64 = 0.5;
+/// A new ball's stroke arriving later than this is refused, s (the bat
+/// would be ~4 cm behind a ball crossing at 4 m/s).
+pub const MAX_LATE_S: f64 = 0.010;
+/// A stroke's targets keep this far inside the software limits, rad (the
+/// path between may overshoot its ends a little, and the lag's
+/// feed-forward leads it).
+pub const LIMIT_MARGIN_RAD: f64 = 10.0 * std::f64::consts::PI / 180.0;
+/// A stroke's targets keep A3 this far from the stretched elbow, rad.
+pub const ELBOW_MARGIN_RAD: f64 = 10.0 * std::f64::consts::PI / 180.0;
+/// A stroke's joints keep |A5| at least this many times the singular
+/// threshold, on the same side as now.
+pub const WRIST_MARGIN: f64 = 5.0;
+/// Step used to turn the bat velocity into joint velocities, s.
+const VELOCITY_STEP_S: f64 = 1e-3;
 
 /// What the generator is doing.
 #[derive(Copy, Clone, Debug, PartialEq, Eq)]
@@ -71,7 +108,7 @@ pub enum Phase {
 }
 
 /// Why a plan was not taken.
-#[derive(Copy, Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[derive(Copy, Clone, Debug, PartialEq, thiserror::Error)]
 pub enum PlanRejected {
     /// A value is NaN or infinite.
     #[error("plan has non-finite values")]
@@ -88,6 +125,37 @@ pub enum PlanRejected {
     /// Ruckig found no trajectory (should not happen after sanitising).
     #[error("no trajectory to the hitting pose")]
     NoTrajectory,
+    /// The hitting pose has no joint solution.
+    #[error("hitting pose out of the arm's reach")]
+    OutOfReach,
+    /// The hitting pose breaks an axis limit (software limit switch, or
+    /// the singular wrist).
+    #[error("hitting pose breaks {0}")]
+    Joint(LimitViolation),
+    /// The stroke arrives too late, within the axes' limits.
+    #[error("stroke would arrive too late")]
+    TooLate,
+}
+
+impl PlanRejected {
+    /// A short key for counting refusals by reason.
+    pub fn key(&self) -> &'static str {
+        match self {
+            PlanRejected::NonFinite => "non_finite",
+            PlanRejected::HitInPast => "hit_in_past",
+            PlanRejected::TooFarAhead => "too_far_ahead",
+            PlanRejected::OutsideWorkspace => "outside_workspace",
+            PlanRejected::NoTrajectory => "no_trajectory",
+            PlanRejected::OutOfReach => "out_of_reach",
+            PlanRejected::Joint(v) => match v.kind {
+                LimitKind::Position => "joint_position_limit",
+                LimitKind::SingularWrist => "singular_wrist",
+                LimitKind::Speed => "joint_speed",
+                LimitKind::Acceleration => "joint_acceleration",
+            },
+            PlanRejected::TooLate => "too_late",
+        }
+    }
 }
 
 /// The accepted target of a plan, in B.
@@ -100,10 +168,14 @@ pub struct StrokeTarget {
     /// TCP pose at the hit (m, rad), pulled into the workspace if needed.
     pub pose: Pose6,
     /// TCP velocity at the hit (m/s; rotational components are 0), speed
-    /// clamped to the cell's bat-speed limit.
+    /// clamped to the cell's bat-speed limit and to what the axes reach.
     pub velocity: Pose6,
     /// Whether the plan had to be clamped to fit the cell.
     pub clamped: bool,
+    /// The joints at the hit, rad.
+    pub joints: Joints,
+    /// The joint velocity at the hit, rad/s.
+    pub joint_velocity: [f64; AXES],
 }
 
 type Otg = Ruckig<6, IgnoreErrorHandler>;
@@ -120,11 +192,13 @@ pub struct StrokeGenerator {
     t0: f64,
     phase: Phase,
     target: Option<StrokeTarget>,
-    /// The last sampled state and its time.
-    p: Pose6,
-    v: Pose6,
-    a: Pose6,
+    /// The last sampled joint state and its time.
+    q: [f64; AXES],
+    qd: [f64; AXES],
+    qdd: [f64; AXES],
     t_last: f64,
+    /// The TCP pose of `q` (angles unwrapped near the last).
+    p: Pose6,
     late_by: f64,
     /// Ruckig calculations done.
     pub calculations: u64,
@@ -141,30 +215,27 @@ fn secs(t: Instant) -> f64 {
 impl StrokeGenerator {
     /// A generator at rest at `start`, at time `now`.
     pub fn new(lim: MotionLimits, now: Instant, start: Pose6) -> Self {
-        let mut input = InputParameter::new(None);
-        for i in 0..6 {
-            input.max_velocity[i] = lim.vmax[i] * GENERATOR_LIMIT_FRACTION;
-            input.max_acceleration[i] = lim.amax[i] * GENERATOR_LIMIT_FRACTION;
-            input.max_jerk[i] = lim.jmax[i] * GENERATOR_LIMIT_FRACTION;
-        }
+        let home_joints = lim.home_joints;
         let mut g = StrokeGenerator {
             otg: Ruckig::new(None, lim.dt),
             traj: Trajectory::new(None),
             spare: Trajectory::new(None),
-            input,
+            input: InputParameter::new(None),
             lim,
             t0: 0.0,
             phase: Phase::Hold,
             target: None,
-            p: start,
-            v: [0.0; 6],
-            a: [0.0; 6],
+            q: home_joints.0,
+            qd: [0.0; AXES],
+            qdd: [0.0; AXES],
             t_last: 0.0,
+            p: start,
             late_by: 0.0,
             calculations: 0,
             failures: 0,
             kept: 0,
         };
+        g.set_limit_scale(1.0);
         g.reset(now, start);
         g
     }
@@ -172,9 +243,11 @@ impl StrokeGenerator {
     /// Restarts at rest at `start` (e.g. the robot's pose at RSI start) and
     /// returns home from there.
     pub fn reset(&mut self, now: Instant, start: Pose6) {
+        let near = self.lim.home_joints;
+        self.q = self.lim.arm.inverse_near(&Pose::from_pose6(&start), &near).unwrap_or(near).0;
+        self.qd = [0.0; AXES];
+        self.qdd = [0.0; AXES];
         self.p = start;
-        self.v = [0.0; 6];
-        self.a = [0.0; 6];
         self.t_last = secs(now);
         self.target = None;
         self.late_by = 0.0;
@@ -200,6 +273,11 @@ impl StrokeGenerator {
     /// The limits in use.
     pub fn limits(&self) -> &MotionLimits {
         &self.lim
+    }
+
+    /// The joints of the last setpoint, rad.
+    pub fn joints(&self) -> Joints {
+        Joints(self.q)
     }
 
     /// Checks and converts a plan to a target in B (see the module doc).
@@ -234,7 +312,7 @@ impl StrokeGenerator {
                 return Err(PlanRejected::OutsideWorkspace);
             }
             // Room to brake from v[i] (jerk-limited) before the wall.
-            let (a, j) = (lim.amax[i] * GENERATOR_LIMIT_FRACTION, lim.jmax[i] * GENERATOR_LIMIT_FRACTION);
+            let (a, j) = (lim.amax[i], lim.jmax[i]);
             let mut vi = v[i];
             let mut margin = vi * vi / (2.0 * a) + vi.abs() * a / j + WALL_MARGIN_M;
             if lim.lo[i] + margin > lim.hi[i] - margin {
@@ -259,7 +337,73 @@ impl StrokeGenerator {
             }
             pose[k] = x;
         }
-        Ok(StrokeTarget { seq: plan.seq, hit_time, pose, velocity: vel, clamped })
+        let mut target = StrokeTarget {
+            seq: plan.seq,
+            hit_time,
+            pose,
+            velocity: vel,
+            clamped,
+            joints: Joints(self.q),
+            joint_velocity: [0.0; AXES],
+        };
+        self.to_joints(&mut target)?;
+        Ok(target)
+    }
+
+    /// The joint target of a stroke: the hitting pose's joints nearest the
+    /// current ones (within the software limits, off the singular wrist)
+    /// and the joint velocity of the bat velocity, slowed where an axis
+    /// would exceed its share of its speed.
+    fn to_joints(&self, t: &mut StrokeTarget) -> Result<(), PlanRejected> {
+        let arm = &self.lim.arm;
+        let q = match arm.inverse_near(&Pose::from_pose6(&t.pose), &Joints(self.q)) {
+            Ok(q) => q,
+            Err(Unreachable::OutOfReach) => return Err(PlanRejected::OutOfReach),
+            Err(Unreachable::Limit(v)) => return Err(PlanRejected::Joint(v)),
+        };
+        arm.limits.check_position(&q).map_err(PlanRejected::Joint)?;
+        self.inside_margin(&q).map_err(PlanRejected::Joint)?;
+        self.clear_of_singularities(&q).map_err(PlanRejected::Joint)?;
+        let qd = self.joint_velocity(&t.pose, &q, &t.velocity, VELOCITY_STEP_S);
+        let mut share = 0.0f64;
+        for i in 0..AXES {
+            share = share.max(qd[i].abs() / (arm.limits.speed[i] * JOINT_LIMIT_FRACTION));
+        }
+        let mut slow = if share > 1.0 { 1.0 / share } else { 1.0 };
+        // After the hit the axes brake to rest: where they stop must be
+        // clear too, else the bat goes slower.
+        let mut attempt = 0;
+        loop {
+            let stop = self.stop_point(&q, &qd.map(|x| x * slow));
+            match self.clear_to_rest(&stop) {
+                Ok(()) => break,
+                Err(v) if attempt == 3 => return Err(PlanRejected::Joint(v)),
+                Err(_) => {
+                    slow *= 0.5;
+                    attempt += 1;
+                }
+            }
+        }
+        if slow < 1.0 {
+            for x in &mut t.velocity {
+                *x *= slow;
+            }
+            t.clamped = true;
+        }
+        t.joints = q;
+        t.joint_velocity = qd.map(|x| x * slow);
+        Ok(())
+    }
+
+    /// The joint velocity at `q` (the joints of `pose`) of the TCP velocity
+    /// `v`: the joints of the pose `step` s along `v` (before it, for a
+    /// negative step), differenced; zero where that pose has none.
+    fn joint_velocity(&self, pose: &Pose6, q: &Joints, v: &Pose6, step: f64) -> [f64; AXES] {
+        let moved: Pose6 = core::array::from_fn(|i| pose[i] + v[i] * step);
+        match self.lim.arm.inverse_near(&Pose::from_pose6(&moved), q) {
+            Ok(q2) => core::array::from_fn(|i| (q2.0[i] - q.0[i]) / step),
+            Err(_) => [0.0; AXES],
+        }
     }
 
     /// Takes a new plan: re-plans towards it from the current state. A plan
@@ -278,9 +422,12 @@ impl StrokeGenerator {
         // acceleration) but differs only a little is not worth arriving late.
         std::mem::swap(&mut self.traj, &mut self.spare);
         let (old_t0, old_target, old_phase) = (self.t0, self.target, self.phase);
-        if !self.calculate(&target.pose, &target.velocity, Some(duration)) {
-            std::mem::swap(&mut self.traj, &mut self.spare);
-            self.t0 = old_t0;
+        let restore = |g: &mut Self| {
+            std::mem::swap(&mut g.traj, &mut g.spare);
+            g.t0 = old_t0;
+        };
+        if !self.calculate(&target.joints.0, &target.joint_velocity, Some(duration)) {
+            restore(self);
             return Err(PlanRejected::NoTrajectory);
         }
         // Ruckig's time-synchronisation step sometimes finds no profile for
@@ -291,9 +438,15 @@ impl StrokeGenerator {
             if self.traj.get_duration() - duration <= LATE_TOLERANCE_S {
                 break;
             }
-            self.calculate(&target.pose, &target.velocity, Some(duration + nudge));
+            self.calculate(&target.joints.0, &target.joint_velocity, Some(duration + nudge));
         }
         let late_by = (self.traj.get_duration() - duration).max(0.0);
+        let same_ball = old_phase == Phase::Approach
+            && old_target.is_some_and(|old| (old.hit_time - target.hit_time).abs() <= KEEP_MAX_DT_S);
+        if late_by > MAX_LATE_S && !same_ball {
+            restore(self);
+            return Err(PlanRejected::TooLate);
+        }
         if late_by > LATE_TOLERANCE_S
             && old_phase == Phase::Approach
             && let Some(old) = old_target
@@ -302,8 +455,7 @@ impl StrokeGenerator {
             && (0..3).all(|i| (old.pose[i] - target.pose[i]).abs() <= KEEP_MAX_DP_M)
             && (0..3).map(|i| (old.pose[i] - target.pose[i]).powi(2)).sum::<f64>().sqrt() <= late_by * BALL_SPEED_AT_HIT
         {
-            std::mem::swap(&mut self.traj, &mut self.spare);
-            self.t0 = old_t0;
+            restore(self);
             self.kept += 1;
             self.late_by = 0.0;
             return Ok(self.target.as_ref().expect("old target"));
@@ -315,20 +467,26 @@ impl StrokeGenerator {
     }
 
     /// Replaces the state the next plan starts from (after the safety
-    /// filter changed a setpoint), and re-plans the current phase from it.
-    pub(crate) fn override_state(&mut self, p: Pose6, v: Pose6, a: Pose6) {
-        self.p = p;
-        self.v = v;
-        self.a = a;
+    /// filter changed a setpoint: pose, velocity and acceleration in B),
+    /// and re-plans the current phase from it.
+    pub(crate) fn override_state(&mut self, p: Pose6, v: Pose6, _a: Pose6) {
+        let arm = &self.lim.arm;
+        if let Ok(q) = arm.inverse_near(&Pose::from_pose6(&p), &Joints(self.q)) {
+            let qd = self.joint_velocity(&p, &q, &v, -self.lim.dt);
+            self.q = q.0;
+            self.qd = qd;
+            self.qdd = [0.0; AXES];
+            self.p = p;
+        }
         match (self.phase, self.target) {
             (Phase::Approach, Some(t)) if t.hit_time > self.t_last => {
-                if !self.calculate(&t.pose, &t.velocity, Some(t.hit_time - self.t_last)) {
+                if !self.calculate(&t.joints.0, &t.joint_velocity, Some(t.hit_time - self.t_last)) {
                     self.go_home();
                 }
             }
             (Phase::FollowThrough, Some(_)) => {
-                let rest = self.p;
-                if !self.calculate(&rest, &[0.0; 6], None) {
+                let rest = self.q;
+                if !self.calculate_calm(&rest) {
                     self.go_home();
                 }
             }
@@ -336,7 +494,8 @@ impl StrokeGenerator {
         }
     }
 
-    /// The setpoint for time `t` (the time the robot will be there).
+    /// The setpoint for time `t` (the time the robot will be there): the
+    /// TCP pose of the sampled joints.
     pub fn next(&mut self, t: Instant) -> Pose6 {
         let t = secs(t);
         // Phase changes at the end of each segment (at most three chain).
@@ -348,14 +507,10 @@ impl StrokeGenerator {
             self.sample_into_state(end);
             match self.phase {
                 Phase::Approach => {
-                    let v = self.v;
-                    let lim = &self.lim;
-                    let mut rest = [0.0; 6];
-                    for i in 0..6 {
-                        let m = if i < 3 { WALL_MARGIN_M } else { 0.0 };
-                        rest[i] = (self.p[i] + v[i] * lim.follow_through).clamp(lim.lo[i] + m, lim.hi[i] - m);
-                    }
-                    if self.calculate(&rest, &[0.0; 6], None) {
+                    // Brake to rest at the stroke's limits (checked clear
+                    // when the plan was taken).
+                    let rest = self.stop_point(&Joints(self.q), &self.qd).0;
+                    if self.calculate(&rest, &[0.0; AXES], None) {
                         self.phase = Phase::FollowThrough;
                     } else {
                         self.go_home();
@@ -370,12 +525,88 @@ impl StrokeGenerator {
             }
         }
         self.sample_into_state(t);
+        self.update_pose();
         self.p
     }
 
+    /// Where the axes come to rest braking from `qd` at `q` (the stroke's
+    /// limits: the jerk ramp, then full deceleration).
+    fn stop_point(&self, q: &Joints, qd: &[f64; AXES]) -> Joints {
+        let l = &self.lim.arm.limits;
+        Joints(core::array::from_fn(|i| {
+            let a = l.acceleration[i] * JOINT_LIMIT_FRACTION;
+            q.0[i] + qd[i] * (qd[i].abs() / (2.0 * a) + JERK_RAMP_S)
+        }))
+    }
+
+    /// A rest pose after a hit: inside the limits with margin, clear of
+    /// the singularities, the TCP inside the workspace box.
+    fn clear_to_rest(&self, q: &Joints) -> Result<(), LimitViolation> {
+        self.lim.arm.limits.check_position(q)?;
+        self.inside_margin(q)?;
+        self.clear_of_singularities(q)?;
+        let lim = &self.lim;
+        let tcp = lim.arm.tcp(q).to_pose6();
+        for i in 0..3 {
+            if tcp[i] < lim.lo[i] - MAX_OUTSIDE_M || tcp[i] > lim.hi[i] + MAX_OUTSIDE_M {
+                let axis = crate::kinematics::Axis::ALL[i];
+                return Err(LimitViolation { axis, kind: LimitKind::Position, value: q.0[i], limit: q.0[i] });
+            }
+        }
+        Ok(())
+    }
+
+    /// `q` on the current side of the wrist and elbow singularities, at
+    /// least [`WRIST_MARGIN`] × the singular threshold from A5 = 0 and
+    /// [`ELBOW_MARGIN_RAD`] from the stretched elbow (where a small TCP
+    /// motion asks the axes for unbounded speed, and the reach ends).
+    fn clear_of_singularities(&self, q: &Joints) -> Result<(), LimitViolation> {
+        let arm = &self.lim.arm;
+        let a5 = q.0[4];
+        let wrist = WRIST_MARGIN * arm.limits.singular_a5;
+        if a5 * self.q[4] <= 0.0 || a5.abs() < wrist {
+            let axis = crate::kinematics::Axis::A5;
+            return Err(LimitViolation { axis, kind: LimitKind::SingularWrist, value: a5, limit: wrist });
+        }
+        let stretched = arm.geometry.stretched_a3();
+        let bend = |a3: f64| {
+            let d = a3 - stretched;
+            d - (d / std::f64::consts::TAU).round() * std::f64::consts::TAU
+        };
+        let (now, then) = (bend(self.q[2]), bend(q.0[2]));
+        if now * then <= 0.0 || then.abs() < ELBOW_MARGIN_RAD {
+            let axis = crate::kinematics::Axis::A3;
+            return Err(LimitViolation { axis, kind: LimitKind::Position, value: q.0[2], limit: stretched });
+        }
+        Ok(())
+    }
+
+    /// `q` at least [`LIMIT_MARGIN_RAD`] inside every software limit.
+    fn inside_margin(&self, q: &Joints) -> Result<(), LimitViolation> {
+        let l = &self.lim.arm.limits;
+        for axis in crate::kinematics::Axis::ALL {
+            let i = axis.index();
+            let (lo, hi) = (l.min[i] + LIMIT_MARGIN_RAD, l.max[i] - LIMIT_MARGIN_RAD);
+            if !(lo..=hi).contains(&q.0[i]) {
+                let limit = if q.0[i] < lo { l.min[i] } else { l.max[i] };
+                return Err(LimitViolation { axis, kind: LimitKind::Position, value: q.0[i], limit });
+            }
+        }
+        Ok(())
+    }
+
+    /// `p` from `q` (forward kinematics; angles unwrapped near the last).
+    fn update_pose(&mut self) {
+        let tcp = self.lim.arm.tcp(&Joints(self.q)).to_pose6();
+        self.p[..3].copy_from_slice(&tcp[..3]);
+        for i in 3..6 {
+            self.p[i] = unwrap_near(tcp[i], self.p[i]);
+        }
+    }
+
     fn go_home(&mut self) {
-        let home = self.lim.home;
-        if self.calculate(&home, &[0.0; 6], None) {
+        let home = self.lim.home_joints.0;
+        if self.calculate_calm(&home) {
             self.phase = Phase::Return;
         } else {
             self.phase = Phase::Hold;
@@ -383,37 +614,66 @@ impl StrokeGenerator {
         self.target = None;
     }
 
-    /// Samples the trajectory at absolute time `t` into the state.
+    /// To rest at `q` at [`CALM_LIMIT_FRACTION`] of the stroke's limits.
+    fn calculate_calm(&mut self, q: &[f64; AXES]) -> bool {
+        self.set_limit_scale(CALM_LIMIT_FRACTION);
+        let ok = self.calculate(q, &[0.0; AXES], None);
+        self.set_limit_scale(1.0);
+        ok
+    }
+
+    /// Ruckig's limits: [`JOINT_LIMIT_FRACTION`] of the axes', times `s`.
+    fn set_limit_scale(&mut self, s: f64) {
+        let l = &self.lim.arm.limits;
+        for i in 0..AXES {
+            let a = l.acceleration[i] * JOINT_LIMIT_FRACTION * s;
+            self.input.max_velocity[i] = l.speed[i] * JOINT_LIMIT_FRACTION * s;
+            self.input.max_acceleration[i] = a;
+            self.input.max_jerk[i] = a / JERK_RAMP_S;
+        }
+    }
+
+    /// Samples the trajectory at absolute time `t` into the joint state. An
+    /// empty trajectory (every axis at rest at its target) leaves the
+    /// joints as they are: Ruckig samples its disabled axes as zeros.
     fn sample_into_state(&mut self, t: f64) {
+        if self.traj.get_duration() <= 0.0 {
+            self.qd = [0.0; AXES];
+            self.qdd = [0.0; AXES];
+            self.t_last = t;
+            return;
+        }
         let mut p = DataArrayOrVec::Stack([0.0; 6]);
         let mut v = DataArrayOrVec::Stack([0.0; 6]);
         let mut a = DataArrayOrVec::Stack([0.0; 6]);
         let mut section = None;
         let dt = (t - self.t0).max(0.0);
         self.traj.at_time(dt, &mut Some(&mut p), &mut Some(&mut v), &mut Some(&mut a), &mut None, &mut section);
-        for i in 0..6 {
-            self.p[i] = p[i];
-            self.v[i] = v[i];
-            self.a[i] = a[i];
+        for i in 0..AXES {
+            self.q[i] = p[i];
+            self.qd[i] = v[i];
+            self.qdd[i] = a[i];
         }
         self.t_last = t;
     }
 
-    /// A new trajectory from the state at `t_last` to the target; false
-    /// (and the old trajectory kept) if Ruckig fails.
-    fn calculate(&mut self, pos: &Pose6, vel: &Pose6, min_duration: Option<f64>) -> bool {
-        for i in 0..6 {
-            self.input.current_position[i] = self.p[i];
-            self.input.current_velocity[i] = self.v[i];
-            self.input.current_acceleration[i] = self.a[i];
+    /// A new joint trajectory from the state at `t_last` to `pos` with
+    /// velocity `vel`; false (and the old trajectory kept) if Ruckig fails.
+    fn calculate(&mut self, pos: &[f64; AXES], vel: &[f64; AXES], min_duration: Option<f64>) -> bool {
+        for i in 0..AXES {
+            self.input.current_position[i] = self.q[i];
+            self.input.current_velocity[i] = self.qd[i];
+            self.input.current_acceleration[i] = self.qdd[i];
             self.input.target_position[i] = pos[i];
             self.input.target_velocity[i] = vel[i];
             self.input.target_acceleration[i] = 0.0;
             // An axis already resting at its target is left out: Ruckig's
             // time synchronisation can fail on such (numerically) empty
             // moves and return a later duration for all axes.
-            let resting =
-                (pos[i] - self.p[i]).abs() < 1e-7 && self.v[i].abs() < 1e-7 && self.a[i].abs() < 1e-6 && vel[i] == 0.0;
+            let resting = (pos[i] - self.q[i]).abs() < 1e-7
+                && self.qd[i].abs() < 1e-7
+                && self.qdd[i].abs() < 1e-6
+                && vel[i] == 0.0;
             self.input.enabled[i] = !resting;
             if resting {
                 self.input.current_position[i] = pos[i];
@@ -429,8 +689,8 @@ impl StrokeGenerator {
         } else {
             self.failures += 1;
             // Hold still where we are: a trajectory of zero length.
-            for i in 0..6 {
-                self.input.target_position[i] = self.p[i];
+            for i in 0..AXES {
+                self.input.target_position[i] = self.q[i];
                 self.input.target_velocity[i] = 0.0;
                 self.input.current_velocity[i] = 0.0;
                 self.input.current_acceleration[i] = 0.0;

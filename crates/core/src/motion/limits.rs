@@ -4,15 +4,11 @@
 #![allow(clippy::needless_range_loop)] // parallel per-axis arrays
 
 use crate::calib::RobotFile;
+use crate::kinematics::{Arm, Joints};
 use crate::physics::Vec3;
 use crate::plan::EulerZyx;
 
 use super::Pose6;
-
-/// Fraction of the cell's limits the generator plans with; the safety
-/// filter enforces the full limits, so a well-behaved stroke never touches
-/// them.
-pub(crate) const GENERATOR_LIMIT_FRACTION: f64 = 0.95;
 
 /// Everything motion needs to know about the cell, in SI.
 #[derive(Clone, Debug, PartialEq)]
@@ -33,12 +29,14 @@ pub struct MotionLimits {
     pub home: Pose6,
     /// The fastest bat speed a plan may ask for, m/s.
     pub max_bat_speed: f64,
-    /// Follow-through time after the hit, s.
-    pub follow_through: f64,
     /// Base yaw in T, rad: the angle of B's x axis about T's z axis.
     pub base_yaw: f64,
     /// Base origin in T, m.
     pub base_xyz: [f64; 3],
+    /// The arm (kinematics, axis limits) every stroke is checked against.
+    pub arm: Arm,
+    /// The joints at home.
+    pub home_joints: Joints,
 }
 
 impl MotionLimits {
@@ -58,9 +56,10 @@ impl MotionLimits {
             jmax: cat(l.jerk_m_s3, rad(l.rot_jerk_deg_s3)),
             home: cat(r.home.xyz_m, home_abc),
             max_bat_speed: l.max_bat_speed_m_s,
-            follow_through: r.rsi.follow_through_s,
             base_yaw: r.base_yaw(),
             base_xyz: r.cell.base_in_table_xyz_m,
+            arm: r.arm(),
+            home_joints: r.home_joints(&r.arm()).expect("a validated robot.toml has home joints"),
         }
     }
 
@@ -119,7 +118,7 @@ pub(crate) fn zyx_of(r: &Mat3) -> (f64, f64, f64) {
 }
 
 /// `x` plus a multiple of 2π, within π of `reference`.
-pub(crate) fn unwrap_near(x: f64, reference: f64) -> f64 {
+pub fn unwrap_near(x: f64, reference: f64) -> f64 {
     let tau = std::f64::consts::TAU;
     x - ((x - reference) / tau).round() * tau
 }

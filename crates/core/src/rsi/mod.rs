@@ -3,7 +3,11 @@
 //!
 //! - [`xml`]: a tolerant, zero-allocation scanner.
 //! - [`codec`]: `<Rob>` and `<Sen>` parse/emit in KUKA units.
+//! - [`session`]: the daemon's sans-IO session (strokes → RKorr).
+//! - [`identify`]: `topspin identify`'s sans-IO side (excitation → RKorr,
+//!   RIst → dead time and servo lag).
 
 pub mod codec;
+pub mod identify;
 pub mod session;
 pub mod xml;

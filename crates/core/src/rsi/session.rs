@@ -16,7 +16,12 @@
 //! `<Rob>` datagram (no IPOC to echo) get no answer, and are counted.
 //!
 //! Timing: the setpoint answered for IPOC k is the pose for the time the
-//! robot will be there, t = (IPOC k on our clock) + lead. IPOC (ms) is the
+//! robot will be there, t = (IPOC k on our clock) + lead (+ the servo's
+//! dead time, when compensated). With the servo's lag compensated, the
+//! correction sent is the setpoint fed forward through the inverse of the
+//! drives' first-order lag (exact for the discrete lag the robot runs):
+//! u = r(t) + (1/α − 1)·(r(t) − r(t − T)), α = 1 − e^(−T/τ), so the axes
+//! arrive at r(t) at t. IPOC (ms) is the
 //! controller's own clock; its offset to ours is the minimum of
 //! (arrival − IPOC) over a sliding window, so arrival jitter does not shake
 //! the path. Only #ABSOLUTE mode is produced.
@@ -27,6 +32,7 @@ use heapless::Deque;
 
 use super::codec::{CodecError, KukaPose, RobFrame, SenFrame, check_text};
 use crate::calib::Calibration;
+use crate::kinematics::Joints;
 use crate::motion::generator::Phase;
 use crate::motion::limits::unwrap_near;
 use crate::motion::{MotionLimits, PlanRejected, Pose6, SafetyFilter, StrokeGenerator};
@@ -60,6 +66,31 @@ pub struct SessionConfig {
     /// The cell's motion limits (workspace, velocity, acceleration, jerk,
     /// home) for the generator and the safety filter.
     pub limits: MotionLimits,
+    /// The robot's servo, as calibrated (`[servo]`), and whether to
+    /// compensate it (command ahead of the dead time, feed the lag
+    /// forward).
+    pub servo: ServoCompensation,
+}
+
+/// The servo the session commands through.
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub struct ServoCompensation {
+    /// Dead time beyond `lead`.
+    pub dead_time: Duration,
+    /// First-order lag time constant, s.
+    pub lag_s: f64,
+    /// Compensate them (false: command as if the robot were ideal).
+    pub enabled: bool,
+}
+
+impl ServoCompensation {
+    /// The feed-forward gain 1/α − 1 for a cycle of `dt` s (0 when off).
+    pub fn feed_forward_gain(&self, dt: f64) -> f64 {
+        if !self.enabled || self.lag_s <= 0.0 {
+            return 0.0;
+        }
+        1.0 / crate::calib::robot::lag_step(dt, self.lag_s) - 1.0
+    }
 }
 
 impl SessionConfig {
@@ -74,6 +105,13 @@ impl SessionConfig {
             latency_budget: Duration::from_micros(1000),
             silence: Duration::from_millis(100),
             limits: MotionLimits::from_robot(&c.robot),
+            servo: ServoCompensation {
+                dead_time: Duration::from_millis(
+                    (c.robot.servo.dead_time_cycles(c.robot.rsi.cycle_ms) * c.robot.rsi.cycle_ms) as u64,
+                ),
+                lag_s: c.robot.servo.lag_s(),
+                enabled: true,
+            },
         }
     }
 }
@@ -226,6 +264,9 @@ pub struct RsiSession {
     last_rx: Option<Instant>,
     last_correction: KukaPose,
     last_command: Pose6,
+    /// The generator's joints at the last setpoint (for the feed-forward).
+    last_joints: Joints,
+    last_joints_valid: bool,
     last_phase: Phase,
     clamping: bool,
     pending: Option<StrikePlan>,
@@ -262,6 +303,8 @@ impl RsiSession {
             last_rx: None,
             last_correction: KukaPose::default(),
             last_command: home,
+            last_joints: Joints([0.0; 6]),
+            last_joints_valid: false,
             last_phase: Phase::Hold,
             clamping: false,
             pending: None,
@@ -298,7 +341,8 @@ impl RsiSession {
         self.start
     }
 
-    /// The last commanded pose (B, m and rad).
+    /// The last commanded pose (B, m and rad): where the bat is to be, within
+    /// the cell's limits (the correction sent adds the lag's feed-forward).
     pub fn last_command(&self) -> Pose6 {
         self.last_command
     }
@@ -427,6 +471,7 @@ impl RsiSession {
         self.safety.reset(self.start);
         self.last_correction = KukaPose::default();
         self.last_command = self.start;
+        self.last_joints_valid = false;
         self.clamping = false;
         self.state = SessionState::Running;
         self.push(SessionEvent::Started { ipoc: rob.ipoc, off_home });
@@ -450,7 +495,8 @@ impl RsiSession {
             self.clock_count = 0;
         }
         let off = self.clock_cur.min(self.clock_prev);
-        let t = robot_ns + off + self.cfg.lead.0 as i128;
+        let dead = if self.cfg.servo.enabled { self.cfg.servo.dead_time.0 } else { 0 };
+        let t = robot_ns + off + self.cfg.lead.0 as i128 + dead as i128;
         Instant(t.clamp(0, u64::MAX as i128) as u64)
     }
 
@@ -491,12 +537,26 @@ impl RsiSession {
             self.last_phase = phase;
             self.push(SessionEvent::PhaseChanged(phase));
         }
+        // The lag's feed-forward, in joint space where the drives lag (the
+        // generator's joints; the Cartesian pose where the safety filter
+        // changed the setpoint).
+        let gain = self.cfg.servo.feed_forward_gain(self.cfg.limits.dt);
+        let q = self.generator.joints();
+        let sent: Pose6 = if gain > 0.0 && !changed && self.last_joints_valid {
+            let lead = Joints(core::array::from_fn(|i| q.0[i] + gain * (q.0[i] - self.last_joints.0[i])));
+            let p = self.cfg.limits.arm.tcp(&lead).to_pose6();
+            core::array::from_fn(|i| if i < 3 { p[i] } else { unwrap_near(p[i], cmd[i]) })
+        } else {
+            core::array::from_fn(|i| cmd[i] + gain * (cmd[i] - self.last_command[i]))
+        };
+        self.last_joints = q;
+        self.last_joints_valid = !changed;
         let mut k = [0.0; 6];
         for i in 0..3 {
-            k[i] = (cmd[i] - self.start[i]) * 1e3;
+            k[i] = (sent[i] - self.start[i]) * 1e3;
         }
         for i in 3..6 {
-            let d = (cmd[i] - self.start[i]).to_degrees();
+            let d = (sent[i] - self.start[i]).to_degrees();
             k[i] = d - (d / 360.0).round() * 360.0;
         }
         if k.iter().all(|x| x.is_finite()) {

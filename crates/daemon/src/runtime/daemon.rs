@@ -92,6 +92,8 @@ pub struct RuntimeConfig {
     pub record_rsi: bool,
     /// The logo thread, if on.
     pub logo: Option<LogoRuntime>,
+    /// Compensate the robot's dead time and lag (`[servo]`).
+    pub servo_compensation: bool,
 }
 
 /// The logo thread's settings.
@@ -138,6 +140,7 @@ impl RuntimeConfig {
             log_interval_s: 10.0,
             record_rsi: false,
             logo: None,
+            servo_compensation: true,
         }
     }
 }
@@ -150,6 +153,33 @@ pub enum LinkState {
     Moving = 1,
     Home = 2,
     Silent = 3,
+    /// The controller went silent with the bat at home (RSI ended there).
+    SilentHome = 4,
+}
+
+/// The link's state after session event `e`, from `current` (`None`: no
+/// change).
+fn next_link(current: LinkState, e: &SessionEvent) -> Option<LinkState> {
+    match e {
+        SessionEvent::Started { .. } => Some(LinkState::Home),
+        SessionEvent::RobotSilent if current == LinkState::Home => Some(LinkState::SilentHome),
+        SessionEvent::RobotSilent => Some(LinkState::Silent),
+        SessionEvent::PhaseChanged(Phase::Hold) => Some(LinkState::Home),
+        SessionEvent::PhaseChanged(_) => Some(LinkState::Moving),
+        _ => None,
+    }
+}
+
+impl LinkState {
+    fn from_u8(x: u8) -> Self {
+        match x {
+            1 => LinkState::Moving,
+            2 => LinkState::Home,
+            3 => LinkState::Silent,
+            4 => LinkState::SilentHome,
+            _ => LinkState::NoRobot,
+        }
+    }
 }
 
 /// What the daemon's run ended with.
@@ -225,8 +255,10 @@ impl Daemon {
         let tracker_socket = UdpSocket::bind(cfg.tracker_bind)?;
         tracker_socket.set_read_timeout(Some(INGEST_POLL))?;
         let tracker_addr = tracker_socket.local_addr()?;
-        let session = RsiSession::new(SessionConfig::from_calibration(cal, &cfg.sentype))
-            .map_err(|e| io::Error::new(io::ErrorKind::InvalidInput, e.to_string()))?;
+        let mut session_cfg = SessionConfig::from_calibration(cal, &cfg.sentype);
+        session_cfg.servo.enabled = cfg.servo_compensation;
+        let session =
+            RsiSession::new(session_cfg).map_err(|e| io::Error::new(io::ErrorKind::InvalidInput, e.to_string()))?;
         let server = RsiServer::bind(cfg.rsi_bind, session, cfg.rsi_wait)?;
         let rsi_addr = server.local_addr()?;
 
@@ -350,12 +382,7 @@ impl Daemon {
     }
 
     pub fn link_state(&self) -> LinkState {
-        match self.link.load(Ordering::Acquire) {
-            1 => LinkState::Moving,
-            2 => LinkState::Home,
-            3 => LinkState::Silent,
-            _ => LinkState::NoRobot,
-        }
+        LinkState::from_u8(self.link.load(Ordering::Acquire))
     }
 
     /// Stops taking balls; the RSI loop goes on until the bat is home.
@@ -372,7 +399,9 @@ impl Daemon {
         let mut home = false;
         let ended_home = loop {
             match self.link_state() {
-                LinkState::NoRobot => break true,
+                // Already silent with the bat home (e.g. the controller
+                // stopped before SIGTERM): it ended home.
+                LinkState::NoRobot | LinkState::SilentHome => break true,
                 LinkState::Silent => break home,
                 LinkState::Home => home = true,
                 LinkState::Moving => home = false,
@@ -572,14 +601,7 @@ struct RsiTelemetry {
 
 impl RsiSink for RsiTelemetry {
     fn event(&mut self, e: SessionEvent) {
-        let state = match e {
-            SessionEvent::Started { .. } => Some(LinkState::Home),
-            SessionEvent::RobotSilent => Some(LinkState::Silent),
-            SessionEvent::PhaseChanged(Phase::Hold) => Some(LinkState::Home),
-            SessionEvent::PhaseChanged(_) => Some(LinkState::Moving),
-            _ => None,
-        };
-        if let Some(s) = state {
+        if let Some(s) = next_link(LinkState::from_u8(self.link.load(Ordering::Acquire)), &e) {
             self.link.store(s as u8, Ordering::Release);
         }
         self.tx.push(Telemetry::Rsi(e));
@@ -614,4 +636,24 @@ fn rsi_loop(
     }
     server.run(stop, &mut plans, sink)?;
     Ok(*server.session().stats())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_controller_silent_with_the_bat_home_ended_home() {
+        let silent = SessionEvent::RobotSilent;
+        assert_eq!(next_link(LinkState::Home, &silent), Some(LinkState::SilentHome));
+        assert_eq!(next_link(LinkState::Moving, &silent), Some(LinkState::Silent));
+        assert_eq!(
+            next_link(LinkState::SilentHome, &SessionEvent::Started { ipoc: 1, off_home: false }),
+            Some(LinkState::Home)
+        );
+        assert_eq!(next_link(LinkState::Home, &SessionEvent::PhaseChanged(Phase::Approach)), Some(LinkState::Moving));
+        for s in [LinkState::NoRobot, LinkState::Moving, LinkState::Home, LinkState::Silent, LinkState::SilentHome] {
+            assert_eq!(LinkState::from_u8(s as u8), s);
+        }
+    }
 }

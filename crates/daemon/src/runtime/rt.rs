@@ -55,6 +55,15 @@ pub(crate) fn pin_current(thread: &'static str, core: usize) -> Result<(), RtWar
     if ok { Ok(()) } else { Err(RtWarning { thread, what: RtRefused::Pin { core } }) }
 }
 
+/// Pins the calling thread to `core` even where its inherited affinity
+/// leaves that core out (an `isolcpus` core is outside a login shell's
+/// set): `topspin doctor`'s probe measures the core the service will be
+/// given, wherever doctor itself was started.
+pub(crate) fn pin_current_anywhere(thread: &'static str, core: usize) -> Result<(), RtWarning> {
+    let ok = core <= crate::config::MAX_CORE && core_affinity::set_for_current(core_affinity::CoreId { id: core });
+    if ok { Ok(()) } else { Err(RtWarning { thread, what: RtRefused::Pin { core } }) }
+}
+
 fn errno() -> i32 {
     std::io::Error::last_os_error().raw_os_error().unwrap_or(0)
 }

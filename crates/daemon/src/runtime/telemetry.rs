@@ -214,6 +214,10 @@ pub struct TelemetrySummary {
     pub late_by_max_ms: f64,
     /// Plans the RSI loop refused.
     pub plans_rejected: u64,
+    /// Balls (trajectories) with a refused plan, by the first refusal's
+    /// reason ([`PlanRejected::key`](topspin_core::motion::PlanRejected::key)).
+    pub skipped: std::collections::BTreeMap<String, u64>,
+    skipped_trajectories: std::collections::BTreeSet<u32>,
     pub telemetry_dropped: u64,
     pub ingest: IngestCounters,
     /// Logo spins fused into a track, and refused by its χ² gate.
@@ -236,6 +240,8 @@ impl TelemetrySummary {
             plans_late: 0,
             late_by_max_ms: 0.0,
             plans_rejected: 0,
+            skipped: Default::default(),
+            skipped_trajectories: Default::default(),
             telemetry_dropped: 0,
             ingest: IngestCounters::default(),
             logo_spins_fused: 0,
@@ -254,6 +260,7 @@ impl TelemetrySummary {
             "plans_late": self.plans_late,
             "late_by_max_ms": self.late_by_max_ms,
             "plans_rejected": self.plans_rejected,
+            "skipped": self.skipped,
             "telemetry_dropped": self.telemetry_dropped,
             "ingest": self.ingest,
             "latency_us": Latencies::of(self),
@@ -420,8 +427,13 @@ fn tally(s: &mut TelemetrySummary, e: &Telemetry, sink: &mut Option<Box<dyn Tele
                     s.late_by_max_ms = s.late_by_max_ms.max(late_by.as_secs_f64() * 1e3);
                     tracing::debug!(target: "topspin::rsi", ?ev);
                 }
-                SessionEvent::PlanRejected { .. } => {
+                SessionEvent::PlanRejected { seq, reason } => {
                     s.plans_rejected += 1;
+                    if let Some(p) = s.last_plans.iter().rev().find(|p| p.seq == *seq)
+                        && s.skipped_trajectories.insert(p.trajectory)
+                    {
+                        *s.skipped.entry(reason.key().to_owned()).or_default() += 1;
+                    }
                     tracing::debug!(target: "topspin::rsi", ?ev);
                 }
                 SessionEvent::PlanAccepted { .. } => {}

@@ -132,7 +132,10 @@ impl Pair {
             wrong_type: c.wrong_type,
             malformed: c.malformed,
             poscorr_clamped: c.poscorr_clamped,
-            robot_limited: c.robot_limited,
+            stopped: c.stopped,
+            peak_speed_share: c.peak_speed_share,
+            peak_acceleration_share: c.peak_acceleration_share,
+            rates_over: c.rates_over,
             ..self.result.clone()
         }
     }

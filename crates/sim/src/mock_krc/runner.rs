@@ -6,8 +6,8 @@
 use std::io;
 use std::net::SocketAddr;
 use std::path::Path;
-use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 
 use super::config::{ContextConfig, EthernetConfig, RsiFileError};
@@ -39,8 +39,10 @@ pub struct MockKrcConfig {
 }
 
 impl MockKrcConfig {
-    /// From the controller-side files and the robot cell: start at home,
-    /// the robot's limits a little above the PC's (`robot_margin`, e.g. 1.02).
+    /// From the controller-side files and the robot cell: start at home
+    /// (in the home joints), the arm's axis limits scaled by
+    /// `robot_margin` (1.0: the robot is what the calibration says), the
+    /// calibration's dead time and lag.
     pub fn from_files(
         ethernet: &EthernetConfig,
         context: &ContextConfig,
@@ -48,10 +50,9 @@ impl MockKrcConfig {
         mode: CorrMode,
         robot_margin: f64,
     ) -> Self {
-        let l = &robot.limits;
-        let cat = |a: [f64; 3], b: [f64; 3], s: f64| {
-            [a[0] * s, a[1] * s, a[2] * s, b[0], b[1], b[2]].map(|x| x * robot_margin)
-        };
+        let mut arm = robot.arm();
+        arm.limits.speed = arm.limits.speed.map(|x| x * robot_margin);
+        arm.limits.acceleration = arm.limits.acceleration.map(|x| x * robot_margin);
         let h = &robot.home;
         let controller = ControllerConfig {
             cycle_ms: robot.rsi.cycle_ms,
@@ -61,8 +62,11 @@ impl MockKrcConfig {
             send: ethernet.send.clone(),
             late_limit: context.timeout as u64,
             start: [h.xyz_m[0] * 1e3, h.xyz_m[1] * 1e3, h.xyz_m[2] * 1e3, h.abc_deg[0], h.abc_deg[1], h.abc_deg[2]],
-            vmax: cat(l.velocity_m_s, l.rot_velocity_deg_s, 1e3),
-            amax: cat(l.acceleration_m_s2, l.rot_acceleration_deg_s2, 1e3),
+            start_joints: robot.home_joints(&arm).expect("a validated robot.toml has home joints"),
+            arm,
+            dead_time_cycles: robot.servo.dead_time_cycles(robot.rsi.cycle_ms),
+            lag_s: robot.servo.lag_s(),
+            stop_on_axis_rates: false,
             lower_mm: context.lower_mm,
             upper_mm: context.upper_mm,
             max_rot_deg: context.max_rot_deg,
@@ -86,7 +90,7 @@ impl MockKrcConfig {
         let e = EthernetConfig::parse(super::config::DEFAULT_ETHERNET_XML)?;
         let c = ContextConfig::parse(super::config::DEFAULT_CONTEXT_XML)?;
         let r = topspin_core::calib::Calibration::default_cell().robot;
-        Ok(Self::from_files(&e, &c, &r, CorrMode::Absolute, 1.02))
+        Ok(Self::from_files(&e, &c, &r, CorrMode::Absolute, 1.0))
     }
 }
 
@@ -102,7 +106,13 @@ pub struct MockResult {
     pub wrong_type: u64,
     pub malformed: u64,
     pub poscorr_clamped: u64,
-    pub robot_limited: u64,
+    /// Why the controller stopped RSI, if it did.
+    pub stopped: Option<StopReason>,
+    /// The fastest and hardest any axis moved, as shares of its limits.
+    pub peak_speed_share: f64,
+    pub peak_acceleration_share: f64,
+    /// Cycles with an axis over its speed or acceleration limit.
+    pub rates_over: u64,
     pub dropped: u64,
     pub delayed: u64,
     pub duplicated: u64,
@@ -117,15 +127,14 @@ pub struct MockResult {
 }
 
 impl MockResult {
-    /// Writes the path as CSV: time, IPOC, on time, robot limited, commanded
-    /// and actual pose.
+    /// Writes the path as CSV: time, IPOC, on time, commanded and actual
+    /// pose, actual joints.
     pub fn write_csv(&self, path: &Path) -> io::Result<()> {
         let mut w = csv::Writer::from_path(path)?;
         w.write_record([
             "t_s",
             "ipoc",
             "on_time",
-            "robot_limited",
             "cmd_x_mm",
             "cmd_y_mm",
             "cmd_z_mm",
@@ -138,16 +147,18 @@ impl MockResult {
             "act_a_deg",
             "act_b_deg",
             "act_c_deg",
+            "a1_deg",
+            "a2_deg",
+            "a3_deg",
+            "a4_deg",
+            "a5_deg",
+            "a6_deg",
         ])?;
         for s in &self.path {
-            let mut rec = vec![
-                format!("{:.6}", s.t.as_secs_f64()),
-                s.ipoc.to_string(),
-                (s.on_time as u8).to_string(),
-                (s.robot_limited as u8).to_string(),
-            ];
+            let mut rec = vec![format!("{:.6}", s.t.as_secs_f64()), s.ipoc.to_string(), (s.on_time as u8).to_string()];
             rec.extend(s.commanded.iter().map(|x| format!("{x:.4}")));
             rec.extend(s.actual.iter().map(|x| format!("{x:.4}")));
+            rec.extend(s.joints.iter().map(|x| format!("{x:.4}")));
             w.write_record(&rec)?;
         }
         w.flush()
@@ -159,7 +170,16 @@ impl MockResult {
 pub struct MockHandle {
     pub stop: Arc<AtomicBool>,
     pub local_addr: SocketAddr,
+    jog: Arc<JogPort>,
     join: JoinHandle<io::Result<MockResult>>,
+}
+
+/// Between a running mock and its owner: a move asked for (taken at the
+/// next cycle's start) and the actual pose after the last cycle.
+#[derive(Debug, Default)]
+struct JogPort {
+    to: Mutex<Option<[f64; 6]>>,
+    actual: Mutex<Option<[f64; 6]>>,
 }
 
 impl MockHandle {
@@ -167,6 +187,17 @@ impl MockHandle {
     pub fn stop(self) -> io::Result<MockResult> {
         self.stop.store(true, Ordering::Relaxed);
         self.join()
+    }
+
+    /// Moves the robot to `pose` (mm, degrees) as its program or the jog
+    /// keys would, RSI still running ([`MockController::move_start`]).
+    pub fn move_to(&self, pose: [f64; 6]) {
+        *self.jog.to.lock().unwrap_or_else(|e| e.into_inner()) = Some(pose);
+    }
+
+    /// The actual pose (`RIst`) after the last cycle, `None` before the first.
+    pub fn actual(&self) -> Option<[f64; 6]> {
+        *self.jog.actual.lock().unwrap_or_else(|e| e.into_inner())
     }
 
     /// Waits for the mock to finish by itself (cycle count, stop by limit).
@@ -181,19 +212,21 @@ pub fn spawn(cfg: MockKrcConfig) -> io::Result<MockHandle> {
     let local_addr = link.local_addr()?;
     let stop = Arc::new(AtomicBool::new(false));
     let s = stop.clone();
-    let join = std::thread::Builder::new().name("mock-krc".into()).spawn(move || run_on(link, &cfg, &s))?;
-    Ok(MockHandle { stop, local_addr, join })
+    let jog = Arc::new(JogPort::default());
+    let j = jog.clone();
+    let join = std::thread::Builder::new().name("mock-krc".into()).spawn(move || run_on(link, &cfg, &s, Some(&j)))?;
+    Ok(MockHandle { stop, local_addr, jog, join })
 }
 
 /// Runs the mock on this thread until `stop`, the cycle count or RSI stops.
 pub fn run(cfg: &MockKrcConfig, stop: &AtomicBool) -> io::Result<MockResult> {
-    run_on(UdpLink::new(cfg.bind, cfg.sensor)?, cfg, stop)
+    run_on(UdpLink::new(cfg.bind, cfg.sensor)?, cfg, stop, None)
 }
 
-fn run_on(link: UdpLink, cfg: &MockKrcConfig, stop: &AtomicBool) -> io::Result<MockResult> {
+fn run_on(link: UdpLink, cfg: &MockKrcConfig, stop: &AtomicBool, jog: Option<&JogPort>) -> io::Result<MockResult> {
     if cfg.faults.any() {
         let mut f = FaultInjector::new(link, cfg.faults, cfg.seed);
-        let mut r = cycle_loop(&mut f, cfg, stop)?;
+        let mut r = cycle_loop(&mut f, cfg, stop, jog)?;
         r.dropped = f.dropped;
         r.delayed = f.delayed;
         r.duplicated = f.duplicated;
@@ -201,11 +234,16 @@ fn run_on(link: UdpLink, cfg: &MockKrcConfig, stop: &AtomicBool) -> io::Result<M
         Ok(r)
     } else {
         let mut l = link;
-        cycle_loop(&mut l, cfg, stop)
+        cycle_loop(&mut l, cfg, stop, jog)
     }
 }
 
-fn cycle_loop<L: Link>(link: &mut L, cfg: &MockKrcConfig, stop: &AtomicBool) -> io::Result<MockResult> {
+fn cycle_loop<L: Link>(
+    link: &mut L,
+    cfg: &MockKrcConfig,
+    stop: &AtomicBool,
+    jog: Option<&JogPort>,
+) -> io::Result<MockResult> {
     let mut ctrl = MockController::new(cfg.controller.clone());
     let cycle = Duration::from_millis(cfg.controller.cycle_ms as u64);
     let deadline_after = if cfg.answer_deadline >= cycle {
@@ -224,6 +262,9 @@ fn cycle_loop<L: Link>(link: &mut L, cfg: &MockKrcConfig, stop: &AtomicBool) -> 
     while !stop.load(Ordering::Relaxed) && cfg.cycles.is_none_or(|n| k < n) && ctrl.stopped.is_none() {
         let t_k = Instant(t0.0 + k * cycle.0);
         clock::sleep_until(t_k, SPIN_BEFORE_DEADLINE);
+        if let Some(to) = jog.and_then(|j| j.to.lock().unwrap_or_else(|e| e.into_inner()).take()) {
+            ctrl.move_start(to);
+        }
         let n = ctrl.request(&mut tx).map_err(|e| io::Error::other(e.to_string()))?;
         link.send(&tx[..n])?;
         let deadline = t_k + deadline_after;
@@ -238,6 +279,9 @@ fn cycle_loop<L: Link>(link: &mut L, cfg: &MockKrcConfig, stop: &AtomicBool) -> 
             }
         }
         let sample = ctrl.end_cycle(t_k + cycle);
+        if let Some(j) = jog {
+            *j.actual.lock().unwrap_or_else(|e| e.into_inner()) = Some(sample.actual);
+        }
         out.path.push(sample);
         k += 1;
     }
@@ -249,6 +293,9 @@ fn cycle_loop<L: Link>(link: &mut L, cfg: &MockKrcConfig, stop: &AtomicBool) -> 
     out.wrong_type = ctrl.wrong_type;
     out.malformed = ctrl.malformed;
     out.poscorr_clamped = ctrl.poscorr_clamped;
-    out.robot_limited = ctrl.robot_limited;
+    out.stopped = ctrl.stopped;
+    out.peak_speed_share = ctrl.peak_speed_share;
+    out.peak_acceleration_share = ctrl.peak_acceleration_share;
+    out.rates_over = ctrl.rates_over;
     Ok(out)
 }
