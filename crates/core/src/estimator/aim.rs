@@ -21,6 +21,7 @@
 //! flights, and none when the prediction has hardly moved.
 
 use crate::calib::StrikeCalib;
+use crate::motion::reach::{ReachMap, SpeedCaps};
 use crate::physics::{BallState, Propagator, RacketModel, Vec3};
 
 /// RK4 step of the return's flight while aiming, s: its landing is within
@@ -174,6 +175,93 @@ pub struct AimBounds {
     pub tilt: (f64, f64),
     /// Bat speed from the stroke's own to the fastest allowed, m/s.
     pub speed: (f64, f64),
+    /// What the arm delivers at the hitting point (`None`: no arm, the
+    /// bounds alone).
+    pub arm: Option<ArmReach>,
+}
+
+/// The fastest bat the arm delivers along the face's normal at one
+/// hitting point, per face tilt ([`ReachMap::caps_at`]; 0: it cannot
+/// present that face there).
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub struct ArmReach {
+    /// The first tilt, rad.
+    pub tilt0: f64,
+    /// The step between tilts, rad.
+    pub step: f64,
+    /// How many of `caps` hold tilts.
+    pub n: usize,
+    /// The fastest bat per tilt, m/s.
+    pub caps: SpeedCaps,
+    /// The blade's roll (Euler c in T) that gives it, per tilt, rad.
+    pub rolls: SpeedCaps,
+}
+
+impl ArmReach {
+    /// The map's caps at (y, z).
+    pub fn at(map: &ReachMap, y: f64, z: f64) -> Self {
+        let (caps, rolls) = map.caps_at(y, z);
+        ArmReach {
+            tilt0: map.tilt(0),
+            step: crate::motion::reach::REACH_TILT_STEP_DEG.to_radians(),
+            n: map.tilts(),
+            caps,
+            rolls,
+        }
+    }
+
+    /// The blade's roll for tilt θ: the nearest tilt's.
+    pub fn roll(&self, tilt: f64) -> f64 {
+        if self.n == 0 {
+            return 0.0;
+        }
+        let k = ((tilt - self.tilt0) / self.step).round().clamp(0.0, (self.n - 1) as f64) as usize;
+        self.rolls[k]
+    }
+
+    /// The fastest bat at tilt θ: linear between the two tilts around it,
+    /// 0 if either cannot be presented.
+    pub fn cap(&self, tilt: f64) -> f64 {
+        if self.n == 0 {
+            return 0.0;
+        }
+        let u = ((tilt - self.tilt0) / self.step).clamp(0.0, (self.n - 1) as f64);
+        let k = (u.floor() as usize).min(self.n - 1);
+        let k1 = (k + 1).min(self.n - 1);
+        let (a, b) = (self.caps[k], self.caps[k1]);
+        if a <= 0.0 || b <= 0.0 {
+            return 0.0;
+        }
+        a + (b - a) * (u - k as f64)
+    }
+
+    /// The longest run of tilts the arm can present (the one nearer an
+    /// upright face among equals), rad; `None`: none.
+    pub fn tilts(&self) -> Option<(f64, f64)> {
+        let mut best: Option<(usize, usize)> = None;
+        let mut k = 0;
+        while k < self.n {
+            if self.caps[k] <= 0.0 {
+                k += 1;
+                continue;
+            }
+            let start = k;
+            while k < self.n && self.caps[k] > 0.0 {
+                k += 1;
+            }
+            let run = (start, k - 1);
+            let tilt = |i: usize| self.tilt0 + i as f64 * self.step;
+            let off = |r: (usize, usize)| tilt(r.0).max(-tilt(r.1)).max(0.0);
+            let better = best.is_none_or(|b| {
+                let (len, blen) = (run.1 - run.0, b.1 - b.0);
+                len > blen || (len == blen && off(run) < off(b))
+            });
+            if better {
+                best = Some(run);
+            }
+        }
+        best.map(|(a, b)| (self.tilt0 + a as f64 * self.step, self.tilt0 + b as f64 * self.step))
+    }
 }
 
 impl AimBounds {
@@ -181,13 +269,29 @@ impl AimBounds {
     pub fn of(cal: &StrikeCalib) -> Self {
         let [closed, open] = cal.aim_tilt_deg.map(f64::to_radians);
         let [slow, fast] = cal.aim_bat_speed;
-        AimBounds { tilt: (closed, open), speed: (slow, fast.max(slow)) }
+        AimBounds { tilt: (closed, open), speed: (slow, fast.max(slow)), arm: None }
     }
 
-    /// The `k`-th of the [`SPEED_STEPS`] bat speeds, slowest first.
-    fn speed(&self, k: usize) -> f64 {
+    /// These bounds where the arm has `arm`: the tilts it can present
+    /// (where it can present any), each speed at most what it delivers.
+    pub fn within(&self, arm: ArmReach) -> Self {
+        let tilt = match arm.tilts() {
+            Some((lo, hi)) if lo.max(self.tilt.0) <= hi.min(self.tilt.1) => (lo.max(self.tilt.0), hi.min(self.tilt.1)),
+            _ => self.tilt,
+        };
+        AimBounds { tilt, arm: Some(arm), ..*self }
+    }
+
+    /// The `k`-th of the [`SPEED_STEPS`] bat speeds, slowest first, at
+    /// face tilt θ: no faster than the arm delivers there (the generator
+    /// would slow it to that).
+    pub fn speed(&self, k: usize, tilt: f64) -> f64 {
         let (lo, hi) = self.speed;
-        lo + (hi - lo) * k as f64 / (SPEED_STEPS - 1) as f64
+        let v = lo + (hi - lo) * k as f64 / (SPEED_STEPS - 1) as f64;
+        match self.arm {
+            Some(a) if a.cap(tilt) > 0.0 => v.min(a.cap(tilt)),
+            _ => v,
+        }
     }
 }
 
@@ -241,7 +345,7 @@ pub fn aim(
     let fly_at = |p: &[f64; 2], level: usize, left: &mut usize, flown: &mut usize| {
         *left = left.saturating_sub(1);
         *flown += 1;
-        landing(prop, racket, ball, p[0], p[1], bounds.speed(level))
+        landing(prop, racket, ball, p[0], p[1], bounds.speed(level, p[0]))
     };
     // A landing as a point (no contact: nowhere useful, far along +x).
     let point = |l: &Option<Landing>| l.map_or([100.0, 0.0], |l| [l.x, l.y]);
@@ -352,7 +456,7 @@ pub fn aim(
         tilt: face[0],
         heading: face[1],
         landing,
-        speed: bounds.speed(out_level),
+        speed: bounds.speed(out_level, face[0]),
         speed_step: out_level,
         ball: *ball,
         target,

@@ -26,6 +26,8 @@ use crate::calib::Calibration;
 use crate::fit::outlier::{START_WINDOW, StartFilter};
 use crate::fit::poly::Cubic;
 use crate::fit::{Prediction, Sample, magnus, predict};
+use crate::motion::MotionLimits;
+use crate::motion::reach::ReachMap;
 use crate::physics::{FlightScales, Propagator, RacketModel, Vec3};
 use crate::plan::StrikePlan;
 use crate::time::Instant;
@@ -249,12 +251,31 @@ pub struct Estimator {
     strike: crate::calib::StrikeCalib,
     racket: RacketModel,
     aim_bounds: aim::AimBounds,
+    /// What the arm can do over the hitting window (`strike.aim =
+    /// "landing"`): the aim keeps to the faces it can present and the bat
+    /// speeds it delivers.
+    reach: Option<ReachMap>,
     candidate: HVec<Sample, START_WINDOW>,
     track: Option<Track>,
     next_id: u32,
     plan_seq: u32,
     last_prediction: Option<Prediction>,
     session: Session,
+}
+
+/// The arm's reach over the calibration's hitting window, for the faces
+/// the aim sets there (its tilt range, heading at the target, the roll).
+fn reach_map(cal: &Calibration) -> ReachMap {
+    let s = &cal.strike;
+    ReachMap::new(
+        &MotionLimits::from_robot(&cal.robot),
+        s.hit_plane_x,
+        s.window_y,
+        s.window_z,
+        s.aim_tilt_deg.map(f64::to_radians),
+        s.aim_target,
+        |y| stroke::bat_roll(s, y),
+    )
 }
 
 impl Estimator {
@@ -267,6 +288,7 @@ impl Estimator {
             strike: cal.strike.clone(),
             racket: cal.racket_model(),
             aim_bounds: aim::AimBounds::of(&cal.strike),
+            reach: (cal.strike.aim == AimMode::Landing).then(|| reach_map(cal)),
             candidate: HVec::new(),
             track: None,
             next_id: 1,
@@ -553,18 +575,17 @@ impl Estimator {
                 let tilt0 = -stroke::paper_beta(&self.strike, &spin);
                 let target = self.strike.aim_target;
                 let warm = track.aim.as_ref();
-                let a = aim::aim(
-                    &self.aim_bounds,
-                    target,
-                    &track.prop,
-                    &self.racket,
-                    &hit.state,
-                    tilt0,
-                    warm,
-                    aim::AIM_BUDGET,
-                );
+                let p = &hit.state.pos;
+                let bounds = match &self.reach {
+                    Some(m) => self.aim_bounds.within(aim::ArmReach::at(m, p.y, p.z)),
+                    None => self.aim_bounds,
+                };
+                let a = aim::aim(&bounds, target, &track.prop, &self.racket, &hit.state, tilt0, warm, aim::AIM_BUDGET);
                 track.aim = Some(a);
-                let roll = stroke::bat_roll(&self.strike, hit.state.pos.y);
+                let roll = match bounds.arm {
+                    Some(arm) => arm.roll(a.tilt),
+                    None => stroke::bat_roll(&self.strike, hit.state.pos.y),
+                };
                 (
                     crate::plan::EulerZyx { a: a.heading, b: a.tilt, c: roll },
                     aim::bat_velocity(a.tilt, a.heading, a.speed),
