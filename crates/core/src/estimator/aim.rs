@@ -14,6 +14,12 @@
 //! not clear the net by [`NET_CLEARANCE`] is re-aimed [`DEEPER`] further
 //! back. θ stays within `strike.aim_tilt_deg`.
 //!
+//! Where the arm is known ([`AimBounds::within`], from the estimator's
+//! [`ReachMap`]), θ also stays within the tilts the arm can present at the
+//! hitting point, and each speed is capped at what its axes deliver along
+//! the face's normal there ([`ArmReach::cap`]): the generator would slow a
+//! faster bat, and the return would land short of where it was aimed.
+//!
 //! Bounded and allocation-free: at most [`AIM_BUDGET`] flights per plan,
 //! each of at most [`AIM_T_MAX`]. The search is resumed by the next plan
 //! for the same ball (its face, speed and Jacobian): an unconverged aim is
@@ -33,7 +39,7 @@ pub(crate) const AIM_T_MAX: f64 = 1.5;
 /// Returns flown per plan at most (the estimator's hot path: a flight
 /// costs a few microseconds); an aim not converged within it goes on with
 /// the next observation's plan.
-pub const AIM_BUDGET: usize = 8;
+pub const AIM_BUDGET: usize = 3;
 /// Returns flown at one speed without landing the ball before a faster
 /// bat is tried.
 pub(crate) const LEVEL_FLIGHTS: usize = 10;

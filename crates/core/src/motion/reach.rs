@@ -140,8 +140,8 @@ pub type SpeedCaps = [f64; REACH_TILTS];
 /// but moves the wrist: at 20 cm over the table a face opened by 30° puts
 /// A5 on its singularity unrolled, and 40° from it rolled by 30°.
 pub const REACH_ROLLS_DEG: [f64; 7] = [0.0, 15.0, -15.0, 30.0, -30.0, 45.0, -45.0];
-/// A roll further from the stroke's own is taken only for a bat this much
-/// faster (a share of the fastest any roll gives).
+/// A roll nearer the stroke's own that lets the bat this near the fastest
+/// allowed (a share of `max_bat_speed`) is taken before any further one.
 const ROLL_GAIN: f64 = 0.9;
 
 /// What the arm can do over the hitting window (see the module doc).
@@ -177,9 +177,10 @@ impl ReachMap {
         target: [f64; 2],
         roll: impl Fn(f64) -> f64,
     ) -> Self {
-        let n = |r: [f64; 2]| ((r[1] - r[0]) / REACH_GRID_M).ceil().max(0.0) as usize + 1;
+        // (Less a hair: 0.55 m / 0.05 m is 11.000000000000002.)
+        let n = |r: [f64; 2]| ((r[1] - r[0]) / REACH_GRID_M - 1e-9).ceil().max(0.0) as usize + 1;
         let step = REACH_TILT_STEP_DEG.to_radians();
-        let tilts = (((tilt[1] - tilt[0]) / step).ceil().max(0.0) as usize + 1).min(REACH_TILTS);
+        let tilts = (((tilt[1] - tilt[0]) / step - 1e-9).ceil().max(0.0) as usize + 1).min(REACH_TILTS);
         let (ny, nz) = (n(y), n(z));
         let mut caps = Vec::with_capacity(ny * nz * tilts);
         let mut rolls = Vec::with_capacity(ny * nz * tilts);
@@ -195,9 +196,19 @@ impl ReachMap {
                         let c = c0 + d.to_radians();
                         (speed_cap(lim, Vec3::new(x, py, pz), EulerZyx { a: heading, b: t, c }), c)
                     };
-                    let tried = REACH_ROLLS_DEG.map(at);
-                    let fastest = tried.iter().map(|t| t.0).fold(0.0, f64::max);
-                    let (cap, c) = tried.into_iter().find(|t| t.0 >= ROLL_GAIN * fastest).unwrap_or((0.0, c0));
+                    // The nearest roll that gives nearly the fastest bat
+                    // allowed; else the one that gives the fastest.
+                    let mut best = (0.0, c0);
+                    for d in REACH_ROLLS_DEG {
+                        let (cap, c) = at(d);
+                        if cap > best.0 {
+                            best = (cap, c);
+                        }
+                        if cap >= ROLL_GAIN * lim.max_bat_speed {
+                            break;
+                        }
+                    }
+                    let (cap, c) = best;
                     caps.push(cap);
                     rolls.push(c);
                 }
