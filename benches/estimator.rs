@@ -2,7 +2,10 @@
 //! update, window refit, prediction through the bounce, stroke) on a
 //! simulated stream of balls back to back. DESIGN §9 budget: p99 < 50 µs.
 //! Criterion reports the mean per observation; a second pass times every
-//! observation on its own and prints p50 / p99 / p99.9 / max.
+//! observation on its own and prints p50 / p99 / p99.9 / max, with the
+//! default stroke (`strike.aim = landing`: the return aimed through the
+//! racket contact model) and with the paper's rule (`paper`) for the
+//! aim's share.
 
 use std::hint::black_box;
 use topspin_daemon::clock;
@@ -36,11 +39,10 @@ enum Step {
     Other,
 }
 
-fn percentiles(obs: &[(Instant, Vec3)]) {
-    let cal = Calibration::default_cell();
+fn percentiles(obs: &[(Instant, Vec3)], cal: &Calibration, label: &str) {
     let mut timed: Vec<(f64, Step)> = Vec::with_capacity(obs.len() * 5);
     for _ in 0..5 {
-        let mut est = Estimator::new(&cal, EstimatorConfig::default());
+        let mut est = Estimator::new(cal, EstimatorConfig::default());
         for &(t, p) in obs {
             let start = clock::now();
             let out = black_box(est.observe(t, p));
@@ -63,7 +65,7 @@ fn percentiles(obs: &[(Instant, Vec3)]) {
         ns.sort_by(f64::total_cmp);
         let q = |p: f64| ns[((ns.len() - 1) as f64 * p) as usize] / 1e3;
         println!(
-            "estimator/observe {name} ({} samples): p50 {:.1} µs  p99 {:.1} µs  p99.9 {:.1} µs  max {:.1} µs",
+            "estimator/observe {label} {name} ({} samples): p50 {:.1} µs  p99 {:.1} µs  p99.9 {:.1} µs  max {:.1} µs",
             ns.len(),
             q(0.5),
             q(0.99),
@@ -80,7 +82,10 @@ fn percentiles(obs: &[(Instant, Vec3)]) {
 fn benches(c: &mut Criterion) {
     let obs = observations();
     let cal = Calibration::default_cell();
-    percentiles(&obs);
+    percentiles(&obs, &cal, "[aim landing]");
+    let mut paper = cal.clone();
+    paper.strike.aim = topspin_core::calib::AimMode::Paper;
+    percentiles(&obs, &paper, "[aim paper]");
     c.bench_function("estimator/observe_stream_of_45_balls", |b| {
         b.iter(|| {
             let mut est = Estimator::new(&cal, EstimatorConfig::default());

@@ -53,7 +53,17 @@ fn axis_correction_hits_as_the_cartesian_one() {
 #[test]
 fn thirty_balls_hit_with_no_late_answers() {
     let r = demo(&["--balls", "30"]);
-    for key in ["balls", "hits", "hit_rate", "late_rsi_answers", "spin_err_pct_median", "hit_err_mm_median"] {
+    for key in [
+        "balls",
+        "hits",
+        "hit_rate",
+        "returns",
+        "return_rate",
+        "return_fails",
+        "late_rsi_answers",
+        "spin_err_pct_median",
+        "hit_err_mm_median",
+    ] {
         assert!(r.get(key).is_some(), "missing {key}");
     }
     for h in ["rsi_answer", "obs_to_plan"] {
@@ -62,9 +72,12 @@ fn thirty_balls_hit_with_no_late_answers() {
         }
     }
     eprintln!(
-        "demo: {} of {} reachable hit, late {} (answers after one cycle: {}), spin err {:.2}%, hit err {:.1} mm",
+        "demo: {} of {} reachable hit, {} returned ({}), late {} (answers after one cycle: {}), spin err {:.2}%, \
+         hit err {:.1} mm",
         r["hits"],
         r["reachable"],
+        r["returns"],
+        r["return_fails"],
         r["late_rsi_answers"],
         r["answers_after_cycle"],
         r["spin_err_pct_median"].as_f64().unwrap(),

@@ -151,7 +151,7 @@ pub fn table(r: &DemoReport) -> String {
     let _ = writeln!(
         out,
         "ball  setting          true spin rps (x y z)   estimated spin rps      spin err  hit err   verdict       \
-         (plan err, plan Δt, bat vs plan)"
+         (plan err, plan Δt, bat vs plan)  return"
     );
     for b in &r.per_ball {
         let est = b.estimated_spin_rps.as_ref().map_or("        no plan        ".to_owned(), rps);
@@ -166,9 +166,19 @@ pub fn table(r: &DemoReport) -> String {
             (Some(p), Some(dt), Some(tr)) => format!("({p:.1} mm, {dt:+.1} ms, {tr:.1} mm)"),
             _ => String::new(),
         };
+        let ret = match (b.reachable, b.return_fail) {
+            (false, _) => String::new(),
+            (true, None) => "RETURNED".to_owned(),
+            (true, Some(f)) => f.name().to_owned(),
+        };
+        let landing = b.landing_xy.map_or(String::new(), |p| format!(" at ({:+.2}, {:+.2}) m", p[0], p[1]));
+        let why = match (b.reachable, &b.return_why) {
+            (true, Some(w)) => format!(" — {w}"),
+            _ => String::new(),
+        };
         let _ = writeln!(
             out,
-            "{:4}  {:15}  {}  {}  {:>8}  {:>8}  {verdict:12}  {diag}",
+            "{:4}  {:15}  {}  {}  {:>8}  {:>8}  {verdict:12}  {diag:30}  {ret}{landing}{why}",
             b.ball,
             b.setting,
             rps(&b.true_spin_rps),
@@ -188,6 +198,20 @@ pub fn table(r: &DemoReport) -> String {
         HIT_RADIUS * 1e3,
         HIT_WINDOW.0 / 1_000_000,
         r.balls - r.reachable
+    );
+    let fails: Vec<String> = topspin_sim::returns::ReturnFail::ALL
+        .iter()
+        .filter(|f| r.return_fails.get(**f) > 0)
+        .map(|f| format!("{} {}", r.return_fails.get(*f), f.name()))
+        .collect();
+    let _ = writeln!(
+        out,
+        "{} of {} reachable balls returned ({:.1}%; the bat's actual pose and velocity at contact, the rubber's \
+         contact model, over the net onto the opponent's half){}",
+        r.returns,
+        r.reachable,
+        r.return_rate * 100.0,
+        if fails.is_empty() { String::new() } else { format!("; not returned: {}", fails.join(", ")) }
     );
     let _ = writeln!(
         out,

@@ -23,6 +23,44 @@ pub struct EulerZyx {
     pub c: f64,
 }
 
+impl EulerZyx {
+    /// The rotation Rz(a)·Ry(b)·Rx(c): the bat frame's axes in the frame
+    /// the angles are given in (its columns).
+    pub fn matrix(&self) -> nalgebra::Matrix3<f64> {
+        let (sa, ca) = self.a.sin_cos();
+        let (sb, cb) = self.b.sin_cos();
+        let (sc, cc) = self.c.sin_cos();
+        nalgebra::Matrix3::new(
+            ca * cb,
+            ca * sb * sc - sa * cc,
+            ca * sb * cc + sa * sc,
+            sa * cb,
+            sa * sb * sc + ca * cc,
+            sa * sb * cc - ca * sc,
+            -sb,
+            cb * sc,
+            cb * cc,
+        )
+    }
+
+    /// The outward normal of the bat's hitting face: −x of the bat (TCP)
+    /// frame. The bat hangs below the flange with the blade in the TCP
+    /// frame's y–z plane (`calib/robot.toml`), so at the planner's neutral
+    /// orientation (0, 0, 0) in T the face is upright and looks at the
+    /// opponent (−x_T); b tilts it: b > 0 opens it (the normal rises by b),
+    /// b < 0 closes it; a turns it about z; c spins the blade about its own
+    /// normal and leaves the face where it is.
+    pub fn face_normal(&self) -> Vec3 {
+        -self.matrix().column(0).into_owned()
+    }
+}
+
+/// The face's tilt: the elevation of its outward normal above the
+/// horizontal, rad (> 0 open, < 0 closed).
+pub fn face_tilt(normal: &Vec3) -> f64 {
+    normal.z.clamp(-1.0, 1.0).asin()
+}
+
 /// Where, when and how the bat should meet the ball. All vectors in the
 /// table frame T, SI units.
 #[derive(Copy, Clone, Debug, PartialEq)]
@@ -39,11 +77,40 @@ pub struct StrikePlan {
     pub position: Vec3,
     /// Bat velocity at the hit.
     pub velocity: Vec3,
-    /// Bat orientation at the hit.
+    /// Bat orientation at the hit ([`EulerZyx::face_normal`] says which
+    /// way the face looks).
     pub orientation: EulerZyx,
     /// The ball's spin in flight before its bounce (what the stroke
     /// answers), rad/s.
     pub spin: Vec3,
     /// 0 (guess) … 1 (certain).
     pub confidence: f64,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_neutral_face_looks_at_the_opponent_and_b_opens_it() {
+        let n = EulerZyx::default().face_normal();
+        assert!((n - Vec3::new(-1.0, 0.0, 0.0)).norm() < 1e-15);
+        let open = EulerZyx { a: 0.0, b: 0.3, c: 0.0 }.face_normal();
+        assert!((face_tilt(&open) - 0.3).abs() < 1e-12 && open.x < 0.0);
+        // a > 0 turns the normal from −x towards −y.
+        let turned = EulerZyx { a: 0.2, b: 0.0, c: 0.0 }.face_normal();
+        assert!((turned - Vec3::new(-0.2f64.cos(), -0.2f64.sin(), 0.0)).norm() < 1e-12);
+        // c spins the blade about its normal: the face stays.
+        let spun = EulerZyx { a: 0.0, b: 0.3, c: 0.7 }.face_normal();
+        assert!((spun - open).norm() < 1e-12);
+        // The same matrix as the motion layer's T → B conversion uses.
+        let o = EulerZyx { a: 0.4, b: -0.2, c: 0.9 };
+        let r = crate::motion::limits::rot_zyx(o.a, o.b, o.c);
+        let m = o.matrix();
+        for i in 0..3 {
+            for j in 0..3 {
+                assert!((m[(i, j)] - r[i][j]).abs() < 1e-15);
+            }
+        }
+    }
 }

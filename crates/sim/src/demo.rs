@@ -10,9 +10,14 @@
 //! crops are streamed as TTI1 datagrams, interleaved in time with the
 //! tracker's, to the daemon's logo thread.
 //!
+//! Each stroke is also judged as a return ([`crate::returns`]): where the
+//! bat's face first meets the true ball, the rubber's contact model sends
+//! it back, and the simulator's physics says whether it clears the net and
+//! lands on the opponent's half (`return_rate`), or why not.
+//!
 //! Balls whose true hitting point lies outside the hitting window
 //! (`calib/strike.toml`) cannot be reached; they are reported, and the hit
-//! rate is over the reachable ones.
+//! and return rates are over the reachable ones.
 
 use std::net::{SocketAddr, UdpSocket};
 use std::path::PathBuf;
@@ -23,6 +28,7 @@ use serde::Serialize;
 use crate::faults::{InjectedCounts, TrackerFaults, inject, plan_datagrams, send_planned};
 use crate::mock_krc::{self, MockKrcConfig};
 use crate::render::{BallColour, Scene, Sequence, SequenceOptions, render_sequence};
+use crate::returns::{BatPath, ContactReport, ReturnFail, ReturnFails, judge_return};
 use crate::stream::{capture_time, stream};
 use crate::{SimBall, TrackerModel, schedule, true_state_at};
 use topspin_core::calib::Calibration;
@@ -121,6 +127,17 @@ pub struct BallVerdict {
     /// The true hitting point lies inside the hitting window.
     pub reachable: bool,
     pub hit: bool,
+    /// The return: over the net onto the opponent's half, judged on the
+    /// bat's actual pose and velocity where it met the ball.
+    pub returned: bool,
+    /// Why not (`None` when returned), and what was wrong: the bat's
+    /// angle, speed, timing or position.
+    pub return_fail: Option<ReturnFail>,
+    pub return_why: Option<String>,
+    /// The bat and the ball at their contact (`None`: no contact).
+    pub contact: Option<ContactReport>,
+    /// Where the return first came down to the table's height (x, y), m.
+    pub landing_xy: Option<[f64; 2]>,
 }
 
 /// The demo's result.
@@ -131,6 +148,12 @@ pub struct DemoReport {
     pub hits: usize,
     /// Hits over reachable balls.
     pub hit_rate: f64,
+    /// Reachable balls returned over the net onto the opponent's half.
+    pub returns: usize,
+    /// Returns over reachable balls.
+    pub return_rate: f64,
+    /// The reachable balls not returned, by reason.
+    pub return_fails: ReturnFails,
     pub late_rsi_answers: u64,
     /// Answers accepted under a stretched deadline that came later than
     /// one cycle (0 unless `answer_deadline` was stretched).
@@ -414,6 +437,11 @@ fn judge(
 
     let reach: Vec<&BallVerdict> = per_ball.iter().filter(|b| b.reachable).collect();
     let hits = reach.iter().filter(|b| b.hit).count();
+    let returns = reach.iter().filter(|b| b.returned).count();
+    let mut return_fails = ReturnFails::default();
+    for f in reach.iter().filter_map(|b| b.return_fail) {
+        return_fails.add(f);
+    }
     let spin: Vec<f64> = reach.iter().filter_map(|b| b.spin_err_pct).collect();
     let hit_err: Vec<f64> = reach.iter().filter_map(|b| b.hit_err_mm).collect();
     DemoReport {
@@ -421,6 +449,9 @@ fn judge(
         reachable: reach.len(),
         hits,
         hit_rate: if reach.is_empty() { 0.0 } else { hits as f64 / reach.len() as f64 },
+        returns,
+        return_rate: if reach.is_empty() { 0.0 } else { returns as f64 / reach.len() as f64 },
+        return_fails,
         late_rsi_answers: mock.late,
         answers_after_cycle: mock.answers_after_cycle,
         rsi_cycles: mock.cycles,
@@ -459,8 +490,9 @@ fn judge(
 
 /// Judges every stroke on the truth: the bat's actual TCP (`path`, the
 /// controller's log) against the ball's true position within ±[`HIT_WINDOW`]
-/// of its true crossing of the hitting plane, and the last plan of each
-/// trajectory (`last_plans`) against the true hit.
+/// of its true crossing of the hitting plane, the last plan of each
+/// trajectory (`last_plans`) against the true hit, and the return
+/// ([`judge_return`]).
 pub(crate) fn judge_strokes(
     cal: &Calibration,
     balls: &[SimBall],
@@ -471,6 +503,7 @@ pub(crate) fn judge_strokes(
 ) -> Vec<BallVerdict> {
     let prop = cal.propagator();
     let robot = &cal.robot;
+    let bat_path = BatPath::new(robot, path);
     let mut per_ball = Vec::new();
     for (k, ball) in balls.iter().enumerate() {
         let truth = &ball.truth;
@@ -497,6 +530,7 @@ pub(crate) fn judge_strokes(
                 .map(|s| robot.b_to_t(Vec3::new(s.actual[0], s.actual[1], s.actual[2]) * 1e-3))
         };
         let tracking_err_mm = plan.and_then(|p| bat_at(p.hit_time).map(|b| (b - p.position).norm() * 1e3));
+        let ret = judge_return(cal, &launch, capture_time(t0, starts[k], 0.0), hit.t, &bat_path);
         per_ball.push(BallVerdict {
             ball: k,
             setting: truth.setting.to_string(),
@@ -509,6 +543,11 @@ pub(crate) fn judge_strokes(
             tracking_err_mm,
             reachable,
             hit: closest.is_some_and(|d| d <= HIT_RADIUS),
+            returned: ret.returned(),
+            return_fail: ret.fail,
+            return_why: ret.why,
+            contact: ret.contact,
+            landing_xy: ret.landing,
         });
     }
     per_ball

@@ -13,6 +13,8 @@
 //! - [`mock_krc`]: the mock KR C4 (RSI client, controller model, faults).
 //! - [`render`]: labelled synthetic ceiling-camera crops.
 //! - [`demo`]: tracker + daemon + mock KR C4 on loopback, judged.
+//! - [`returns`]: the judge of returns: the bat's actual path meets the
+//!   true ball, the rubber sends it back, the flight says where it lands.
 //! - [`probe`]: a minimal Foxglove WebSocket client that counts.
 //! - [`worlds`]: physics unlike the estimator's, for judging the fit.
 //! - [`world`]: the demo's whole cell (tracker, ingest, estimator, RSI
@@ -29,6 +31,7 @@ pub mod launcher;
 pub mod mock_krc;
 pub mod probe;
 pub mod render;
+pub mod returns;
 pub mod stream;
 pub mod strikes;
 pub mod tracker;

@@ -9,7 +9,7 @@ pub mod cell;
 
 use serde::{Deserialize, Serialize};
 
-use crate::physics::{PhysicsParams, Propagator, Table};
+use crate::physics::{PhysicsParams, Propagator, RacketModel, RacketParams, Table};
 
 pub mod robot;
 pub use robot::RobotFile;
@@ -27,6 +27,10 @@ pub(crate) struct PhysicsFile {
     /// Format version of the file.
     pub version: u32,
     pub physics: PhysicsParams,
+    /// `[racket]`: the bat's rubber (files written before it existed get
+    /// the compiled-in rubber).
+    #[serde(default)]
+    pub racket: RacketParams,
 }
 
 /// `calib/table.toml`.
@@ -69,6 +73,49 @@ pub struct StrikeCalib {
     pub c0_deg: f64,
     /// Slope of C with the hitting point's y (table frame), degrees per m.
     pub c_per_y_deg: f64,
+    /// How the face is set: aim the return at `aim_target` through the
+    /// racket contact model, or the paper's rule (files written before it
+    /// existed aim).
+    #[serde(default)]
+    pub aim: AimMode,
+    /// Where returns are aimed (x, y in T, on the opponent's half), m.
+    #[serde(default = "default_aim_target")]
+    pub aim_target: [f64; 2],
+    /// The face's tilt range the aim may use, degrees: most closed (< 0),
+    /// most open (> 0).
+    #[serde(default = "default_aim_tilt")]
+    pub aim_tilt_deg: [f64; 2],
+    /// The bat speeds the aim may use, slowest and fastest, m/s (the
+    /// fastest at most `robot.toml`'s `max_bat_speed_m_s`).
+    #[serde(default = "default_aim_bat_speed")]
+    pub aim_bat_speed: [f64; 2],
+}
+
+/// How the stroke sets the bat's face (`strike.aim`).
+#[derive(Copy, Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum AimMode {
+    /// Tilt and turn the face so the return lands at `aim_target`
+    /// (`estimator::aim`), within the paper's β bounds, bat at `bat_speed`.
+    #[default]
+    Landing,
+    /// The paper's rule: β linear in ω_y, A and C linear in y.
+    Paper,
+}
+
+/// The middle of the opponent's half.
+fn default_aim_target() -> [f64; 2] {
+    [-0.70, 0.0]
+}
+
+/// 0.5 … 2 m/s (2 m/s: the compiled-in robot's fastest bat).
+fn default_aim_bat_speed() -> [f64; 2] {
+    [0.5, 2.0]
+}
+
+/// ±40°: inside the workspace's ±45° about home (`robot.toml`).
+fn default_aim_tilt() -> [f64; 2] {
+    [-40.0, 40.0]
 }
 
 impl StrikeCalib {
@@ -90,6 +137,8 @@ pub(crate) struct StrikeFile {
 pub struct Calibration {
     /// Ball, air and contact constants (`calib/physics.toml`).
     pub physics: PhysicsParams,
+    /// The bat's rubber (`[racket]` in `calib/physics.toml`).
+    pub racket: RacketParams,
     /// Table geometry (`calib/table.toml`).
     pub table: Table,
     /// Hitting plane, window and stroke (`calib/strike.toml`).
@@ -243,8 +292,9 @@ impl Calibration {
         robot: (&str, &Path),
     ) -> Result<Self, CalibError> {
         let (text, path) = (physics.0, physics.1.to_owned());
-        let physics = parse::<PhysicsFile>(text, &path)?.physics;
+        let PhysicsFile { physics, racket, .. } = parse::<PhysicsFile>(text, &path)?;
         physics.validate().map_err(|source| CalibError::Invalid { path: path.clone(), source })?;
+        racket.validate(physics.mass).map_err(|source| CalibError::Invalid { path: path.clone(), source })?;
 
         let (text, path) = (table.0, table.1.to_owned());
         let table = parse::<TableFile>(text, &path)?.table;
@@ -276,6 +326,24 @@ impl Calibration {
             ("strike.a_per_y_deg", s.a_per_y_deg, s.a_per_y_deg.abs() <= 180.0),
             ("strike.c0_deg", s.c0_deg, s.c0_deg.abs() <= 180.0),
             ("strike.c_per_y_deg", s.c_per_y_deg, s.c_per_y_deg.abs() <= 180.0),
+            (
+                "strike.aim_target (on the opponent's half)",
+                s.aim_target[0],
+                s.aim_target[0] < 0.0 && s.aim_target[0] > table.opponent_end_x(),
+            ),
+            ("strike.aim_target (on the opponent's half)", s.aim_target[1], s.aim_target[1].abs() < table.width / 2.0),
+            (
+                "strike.aim_tilt_deg",
+                s.aim_tilt_deg[0],
+                s.aim_tilt_deg[0] <= 0.0 && s.aim_tilt_deg[0] >= -80.0 && ordered(s.aim_tilt_deg),
+            ),
+            ("strike.aim_tilt_deg", s.aim_tilt_deg[1], s.aim_tilt_deg[1] >= 0.0 && s.aim_tilt_deg[1] <= 80.0),
+            (
+                "strike.aim_bat_speed",
+                s.aim_bat_speed[0],
+                s.aim_bat_speed[0] > 0.0 && s.aim_bat_speed[0] <= s.aim_bat_speed[1],
+            ),
+            ("strike.aim_bat_speed", s.aim_bat_speed[1], s.aim_bat_speed[1].is_finite()),
         ];
         for (key, value, ok) in checks {
             if !ok {
@@ -309,6 +377,14 @@ impl Calibration {
                 }
             }
         }
+        // The aim may not ask for a faster bat than the robot gives.
+        if strike.aim_bat_speed[1] > robot.limits.max_bat_speed_m_s {
+            return Err(CalibError::OutOfRange {
+                path,
+                key: "strike.aim_bat_speed (faster than robot limits.max_bat_speed_m_s)",
+                value: strike.aim_bat_speed[1],
+            });
+        }
         // The hitting plane must cross the robot's workspace.
         let x_b = robot.t_to_b(crate::physics::Vec3::new(strike.hit_plane_x, 0.0, 0.0)).x;
         if !(robot.workspace.min_xyz_m[0]..=robot.workspace.max_xyz_m[0]).contains(&x_b) {
@@ -318,7 +394,7 @@ impl Calibration {
                 value: strike.hit_plane_x,
             });
         }
-        let cell = Calibration { physics, table, strike, robot };
+        let cell = Calibration { physics, racket, table, strike, robot };
         // The arm must reach most of the window, not only its box: a base
         // measured in the wrong place leaves the box inside POSCORR but the
         // window outside the arm's joints.
@@ -370,6 +446,11 @@ impl Calibration {
         self
     }
 
+    /// The racket contact for this cell's rubber and ball.
+    pub fn racket_model(&self) -> RacketModel {
+        RacketModel::new(self.racket, self.physics.mass, self.physics.radius)
+    }
+
     /// The propagator for this cell's physics and table.
     pub fn propagator(&self) -> Propagator {
         Propagator::new(self.physics.flight_model(), self.physics.bounce_model(), self.table)
@@ -384,6 +465,30 @@ mod tests {
     fn compiled_defaults_load() {
         let c = Calibration::default_cell();
         assert!(c.strike.hit_plane_x > c.table.robot_end_x());
+    }
+
+    #[test]
+    fn files_from_before_the_racket_and_the_aim_still_load() {
+        let p = Path::new("physics.toml");
+        let old_physics = &DEFAULT_PHYSICS[..DEFAULT_PHYSICS.find("[racket]").expect("the shipped file has it")];
+        let old_strike: String =
+            DEFAULT_STRIKE.lines().filter(|l| !l.starts_with("aim")).map(|l| format!("{l}\n")).collect();
+        let c = Calibration::from_texts((old_physics, p), (DEFAULT_TABLE, p), (&old_strike, p), (DEFAULT_ROBOT, p))
+            .unwrap();
+        assert_eq!(c.racket, RacketParams::default());
+        assert_eq!(c.racket, Calibration::default_cell().racket, "the shipped [racket] is the default rubber");
+        assert_eq!(c.strike.aim, AimMode::Landing);
+        assert_eq!(c.strike, Calibration::default_cell().strike);
+        // A bad rubber or aim is named.
+        let bad = DEFAULT_PHYSICS.replace("friction = 0.65", "friction = -0.1");
+        let e = Calibration::from_texts((&bad, p), (DEFAULT_TABLE, p), (DEFAULT_STRIKE, p), (DEFAULT_ROBOT, p));
+        assert!(e.unwrap_err().to_string().contains("racket.friction"));
+        let bad = DEFAULT_STRIKE.replace("aim_bat_speed = [0.5, 2.0]", "aim_bat_speed = [0.5, 3.0]");
+        let e = Calibration::from_texts((DEFAULT_PHYSICS, p), (DEFAULT_TABLE, p), (&bad, p), (DEFAULT_ROBOT, p));
+        assert!(e.unwrap_err().to_string().contains("strike.aim_bat_speed"));
+        let bad = DEFAULT_STRIKE.replace("aim_target = [-0.70, 0.0]", "aim_target = [0.70, 0.0]");
+        let e = Calibration::from_texts((DEFAULT_PHYSICS, p), (DEFAULT_TABLE, p), (&bad, p), (DEFAULT_ROBOT, p));
+        assert!(e.unwrap_err().to_string().contains("strike.aim_target"));
     }
 
     #[test]

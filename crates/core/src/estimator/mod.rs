@@ -14,17 +14,21 @@
 //! or a real change of course): those observations then open a new
 //! candidate.
 
+pub mod aim;
 pub mod ekf;
 pub mod session;
 pub mod stroke;
 
 use heapless::Vec as HVec;
 
+use crate::calib::AimMode;
 use crate::calib::Calibration;
 use crate::fit::outlier::{START_WINDOW, StartFilter};
 use crate::fit::poly::Cubic;
 use crate::fit::{Prediction, Sample, magnus, predict};
-use crate::physics::{FlightScales, Propagator, Vec3};
+use crate::motion::MotionLimits;
+use crate::motion::reach::ReachMap;
+use crate::physics::{FlightScales, Propagator, RacketModel, Vec3};
 use crate::plan::StrikePlan;
 use crate::time::Instant;
 use ekf::{Ekf, EkfNoise, Update};
@@ -233,6 +237,9 @@ struct Track {
     bounce_t: Option<f64>,
     /// Accepted observations after the bounce, short of the hitting plane.
     after: HVec<Sample, AFTER_CAP>,
+    /// The last aim of the return (`strike.aim = "landing"`): the next
+    /// refinement starts from it.
+    aim: Option<aim::Aim>,
 }
 
 /// The estimator: at most one ball tracked at a time (the one coming at
@@ -242,12 +249,33 @@ pub struct Estimator {
     cfg: EstimatorConfig,
     prop: Propagator,
     strike: crate::calib::StrikeCalib,
+    racket: RacketModel,
+    aim_bounds: aim::AimBounds,
+    /// What the arm can do over the hitting window (`strike.aim =
+    /// "landing"`): the aim keeps to the faces it can present and the bat
+    /// speeds it delivers.
+    reach: Option<ReachMap>,
     candidate: HVec<Sample, START_WINDOW>,
     track: Option<Track>,
     next_id: u32,
     plan_seq: u32,
     last_prediction: Option<Prediction>,
     session: Session,
+}
+
+/// The arm's reach over the calibration's hitting window, for the faces
+/// the aim sets there (its tilt range, heading at the target, the roll).
+fn reach_map(cal: &Calibration) -> ReachMap {
+    let s = &cal.strike;
+    ReachMap::new(
+        &MotionLimits::from_robot(&cal.robot),
+        s.hit_plane_x,
+        s.window_y,
+        s.window_z,
+        s.aim_tilt_deg.map(f64::to_radians),
+        s.aim_target,
+        |y| stroke::bat_roll(s, y),
+    )
 }
 
 impl Estimator {
@@ -258,6 +286,9 @@ impl Estimator {
             cfg,
             prop: cal.propagator(),
             strike: cal.strike.clone(),
+            racket: cal.racket_model(),
+            aim_bounds: aim::AimBounds::of(&cal.strike),
+            reach: (cal.strike.aim == AimMode::Landing).then(|| reach_map(cal)),
             candidate: HVec::new(),
             track: None,
             next_id: 1,
@@ -421,6 +452,7 @@ impl Estimator {
             spin_before_bounce: None,
             bounce_t: None,
             after: HVec::new(),
+            aim: None,
         });
         out.push(EstimatorEvent::Started { trajectory: id, t: last.t, start_outliers: outliers.len() as u8 });
         self.plan(last.t, out);
@@ -513,7 +545,7 @@ impl Estimator {
     }
 
     fn plan(&mut self, t: f64, out: &mut StepOutput) {
-        let Some(track) = &self.track else { return };
+        let Some(track) = &mut self.track else { return };
         let state = track.ekf.state();
         let prediction = predict(&track.prop, &state, t, self.strike.hit_plane_x);
         self.last_prediction = Some(prediction);
@@ -535,14 +567,39 @@ impl Estimator {
             + tau * tau * p.fixed_view::<3, 3>(3, 3).trace()
             + (0.5 * tau * tau * k_m).powi(2) * p.fixed_view::<3, 3>(6, 6).trace();
         let confidence = 1.0 / (1.0 + var / (0.02 * 0.02));
+        let (orientation, velocity) = match self.strike.aim {
+            AimMode::Paper => {
+                (stroke::bat_orientation(&self.strike, &spin, hit.state.pos.y), stroke::bat_velocity(&self.strike))
+            }
+            AimMode::Landing => {
+                let tilt0 = -stroke::paper_beta(&self.strike, &spin);
+                let target = self.strike.aim_target;
+                let warm = track.aim.as_ref();
+                let p = &hit.state.pos;
+                let bounds = match &self.reach {
+                    Some(m) => self.aim_bounds.within(aim::ArmReach::at(m, p.y, p.z)),
+                    None => self.aim_bounds,
+                };
+                let a = aim::aim(&bounds, target, &track.prop, &self.racket, &hit.state, tilt0, warm, aim::AIM_BUDGET);
+                track.aim = Some(a);
+                let roll = match bounds.arm {
+                    Some(arm) => arm.roll(a.tilt),
+                    None => stroke::bat_roll(&self.strike, hit.state.pos.y),
+                };
+                (
+                    crate::plan::EulerZyx { a: a.heading, b: a.tilt, c: roll },
+                    aim::bat_velocity(a.tilt, a.heading, a.speed),
+                )
+            }
+        };
         out.plan = Some(StrikePlan {
             seq: self.plan_seq,
             trajectory: track.id,
             made_at: Instant::from_secs_f64(t),
             hit_time: Instant::from_secs_f64(hit.t),
             position: hit.state.pos,
-            velocity: stroke::bat_velocity(&self.strike),
-            orientation: stroke::bat_orientation(&self.strike, &spin, hit.state.pos.y),
+            velocity,
+            orientation,
             spin,
             confidence,
         });

@@ -44,6 +44,7 @@
 use rsruckig::prelude::*;
 
 use super::limits::unwrap_near;
+use super::reach;
 use super::{MotionLimits, Pose6};
 use crate::kinematics::{AXES, Joints, LimitKind, LimitViolation, Pose, Unreachable};
 use crate::plan::StrikePlan;
@@ -270,6 +271,11 @@ impl StrokeGenerator {
         self.late_by
     }
 
+    /// The generator's floor for |A5| at a stroke's joints, rad.
+    fn wrist(&self) -> f64 {
+        WRIST_MARGIN * self.lim.arm.limits.singular_a5
+    }
+
     /// The limits in use.
     pub fn limits(&self) -> &MotionLimits {
         &self.lim
@@ -362,22 +368,19 @@ impl StrokeGenerator {
             Err(Unreachable::Limit(v)) => return Err(PlanRejected::Joint(v)),
         };
         arm.limits.check_position(&q).map_err(PlanRejected::Joint)?;
-        self.inside_margin(&q).map_err(PlanRejected::Joint)?;
-        self.clear_of_singularities(&q).map_err(PlanRejected::Joint)?;
-        let qd = self.joint_velocity(&t.pose, &q, &t.velocity, VELOCITY_STEP_S);
-        let mut share = 0.0f64;
-        for i in 0..AXES {
-            share = share.max(qd[i].abs() / (arm.limits.speed[i] * JOINT_LIMIT_FRACTION));
-        }
+        reach::inside_margin(&self.lim, &q).map_err(PlanRejected::Joint)?;
+        reach::clear_of_singularities(&self.lim, &Joints(self.q), &q, self.wrist()).map_err(PlanRejected::Joint)?;
+        let qd = reach::joint_velocity(&self.lim, &t.pose, &q, &t.velocity, VELOCITY_STEP_S);
+        let share = reach::speed_share(&self.lim, &qd);
         let mut slow = if share > 1.0 { 1.0 / share } else { 1.0 };
         // After the hit the axes brake to rest: where they stop must be
         // clear too, else the bat goes slower.
         let mut attempt = 0;
         loop {
-            let stop = self.stop_point(&q, &qd.map(|x| x * slow));
-            match self.clear_to_rest(&stop) {
+            let stop = reach::stop_point(&self.lim, &q, &qd.map(|x| x * slow));
+            match reach::clear_to_rest(&self.lim, &Joints(self.q), &stop, self.wrist()) {
                 Ok(()) => break,
-                Err(v) if attempt == 3 => return Err(PlanRejected::Joint(v)),
+                Err(v) if attempt == reach::REST_HALVINGS => return Err(PlanRejected::Joint(v)),
                 Err(_) => {
                     slow *= 0.5;
                     attempt += 1;
@@ -393,17 +396,6 @@ impl StrokeGenerator {
         t.joints = q;
         t.joint_velocity = qd.map(|x| x * slow);
         Ok(())
-    }
-
-    /// The joint velocity at `q` (the joints of `pose`) of the TCP velocity
-    /// `v`: the joints of the pose `step` s along `v` (before it, for a
-    /// negative step), differenced; zero where that pose has none.
-    fn joint_velocity(&self, pose: &Pose6, q: &Joints, v: &Pose6, step: f64) -> [f64; AXES] {
-        let moved: Pose6 = core::array::from_fn(|i| pose[i] + v[i] * step);
-        match self.lim.arm.inverse_near(&Pose::from_pose6(&moved), q) {
-            Ok(q2) => core::array::from_fn(|i| (q2.0[i] - q.0[i]) / step),
-            Err(_) => [0.0; AXES],
-        }
     }
 
     /// Takes a new plan: re-plans towards it from the current state. A plan
@@ -472,7 +464,7 @@ impl StrokeGenerator {
     pub(crate) fn override_state(&mut self, p: Pose6, v: Pose6, _a: Pose6) {
         let arm = &self.lim.arm;
         if let Ok(q) = arm.inverse_near(&Pose::from_pose6(&p), &Joints(self.q)) {
-            let qd = self.joint_velocity(&p, &q, &v, -self.lim.dt);
+            let qd = reach::joint_velocity(&self.lim, &p, &q, &v, -self.lim.dt);
             self.q = q.0;
             self.qd = qd;
             self.qdd = [0.0; AXES];
@@ -509,7 +501,7 @@ impl StrokeGenerator {
                 Phase::Approach => {
                     // Brake to rest at the stroke's limits (checked clear
                     // when the plan was taken).
-                    let rest = self.stop_point(&Joints(self.q), &self.qd).0;
+                    let rest = reach::stop_point(&self.lim, &Joints(self.q), &self.qd).0;
                     if self.calculate(&rest, &[0.0; AXES], None) {
                         self.phase = Phase::FollowThrough;
                     } else {
@@ -527,72 +519,6 @@ impl StrokeGenerator {
         self.sample_into_state(t);
         self.update_pose();
         self.p
-    }
-
-    /// Where the axes come to rest braking from `qd` at `q` (the stroke's
-    /// limits: the jerk ramp, then full deceleration).
-    fn stop_point(&self, q: &Joints, qd: &[f64; AXES]) -> Joints {
-        let l = &self.lim.arm.limits;
-        Joints(core::array::from_fn(|i| {
-            let a = l.acceleration[i] * JOINT_LIMIT_FRACTION;
-            q.0[i] + qd[i] * (qd[i].abs() / (2.0 * a) + JERK_RAMP_S)
-        }))
-    }
-
-    /// A rest pose after a hit: inside the limits with margin, clear of
-    /// the singularities, the TCP inside the workspace box.
-    fn clear_to_rest(&self, q: &Joints) -> Result<(), LimitViolation> {
-        self.lim.arm.limits.check_position(q)?;
-        self.inside_margin(q)?;
-        self.clear_of_singularities(q)?;
-        let lim = &self.lim;
-        let tcp = lim.arm.tcp(q).to_pose6();
-        for i in 0..3 {
-            if tcp[i] < lim.lo[i] - MAX_OUTSIDE_M || tcp[i] > lim.hi[i] + MAX_OUTSIDE_M {
-                let axis = crate::kinematics::Axis::ALL[i];
-                return Err(LimitViolation { axis, kind: LimitKind::Position, value: q.0[i], limit: q.0[i] });
-            }
-        }
-        Ok(())
-    }
-
-    /// `q` on the current side of the wrist and elbow singularities, at
-    /// least [`WRIST_MARGIN`] × the singular threshold from A5 = 0 and
-    /// [`ELBOW_MARGIN_RAD`] from the stretched elbow (where a small TCP
-    /// motion asks the axes for unbounded speed, and the reach ends).
-    fn clear_of_singularities(&self, q: &Joints) -> Result<(), LimitViolation> {
-        let arm = &self.lim.arm;
-        let a5 = q.0[4];
-        let wrist = WRIST_MARGIN * arm.limits.singular_a5;
-        if a5 * self.q[4] <= 0.0 || a5.abs() < wrist {
-            let axis = crate::kinematics::Axis::A5;
-            return Err(LimitViolation { axis, kind: LimitKind::SingularWrist, value: a5, limit: wrist });
-        }
-        let stretched = arm.geometry.stretched_a3();
-        let bend = |a3: f64| {
-            let d = a3 - stretched;
-            d - (d / std::f64::consts::TAU).round() * std::f64::consts::TAU
-        };
-        let (now, then) = (bend(self.q[2]), bend(q.0[2]));
-        if now * then <= 0.0 || then.abs() < ELBOW_MARGIN_RAD {
-            let axis = crate::kinematics::Axis::A3;
-            return Err(LimitViolation { axis, kind: LimitKind::Position, value: q.0[2], limit: stretched });
-        }
-        Ok(())
-    }
-
-    /// `q` at least [`LIMIT_MARGIN_RAD`] inside every software limit.
-    fn inside_margin(&self, q: &Joints) -> Result<(), LimitViolation> {
-        let l = &self.lim.arm.limits;
-        for axis in crate::kinematics::Axis::ALL {
-            let i = axis.index();
-            let (lo, hi) = (l.min[i] + LIMIT_MARGIN_RAD, l.max[i] - LIMIT_MARGIN_RAD);
-            if !(lo..=hi).contains(&q.0[i]) {
-                let limit = if q.0[i] < lo { l.min[i] } else { l.max[i] };
-                return Err(LimitViolation { axis, kind: LimitKind::Position, value: q.0[i], limit });
-            }
-        }
-        Ok(())
     }
 
     /// `p` from `q` (forward kinematics; angles unwrapped near the last).

@@ -8,6 +8,9 @@
 //!   with the bat velocity, follow through, return home — generated online
 //!   with Ruckig (jerk-limited, continuous in velocity and acceleration) and
 //!   re-planned whenever a refined plan arrives.
+//! - [`reach`]: what the arm can do at a hitting point — the face tilts
+//!   it can present there and the fastest bat its axes deliver — for the
+//!   aim, and the joint checks the generator applies to every stroke.
 //! - [`safety`]: the last line: workspace box, per-cycle step (velocity) and
 //!   step-change (acceleration) limits, with braking before the box walls.
 //!   Whatever the generator or a hostile plan asks, nothing outside these
@@ -19,6 +22,7 @@
 
 pub mod generator;
 pub mod limits;
+pub mod reach;
 pub mod safety;
 
 pub use generator::{Phase, PlanRejected, StrokeGenerator};

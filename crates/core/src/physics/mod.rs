@@ -1,18 +1,21 @@
 //! Ball physics in the table frame T (DESIGN §2, §3): the flight model
-//! (drag, Magnus lift, gravity), the table and net, the table bounce, and a
-//! fixed-step RK4 propagator that stops at events (bounce, net, hitting
-//! plane). Pure functions of their inputs: no clock, no I/O, no allocation.
+//! (drag, Magnus lift, gravity), the table and net, the table bounce, the
+//! bat's rubber (the racket contact), and a fixed-step RK4 propagator that
+//! stops at events (bounce, net, hitting plane). Pure functions of their
+//! inputs: no clock, no I/O, no allocation.
 
 pub mod bounce;
 pub mod flight;
 pub mod params;
 pub mod propagate;
+pub mod racket;
 pub mod table;
 
 pub use bounce::BounceModel;
 pub use flight::{FlightModel, FlightScales, LiftModel};
 pub use params::{FlightVariation, PhysicsParams};
 pub use propagate::{Event, Propagator, StopAt};
+pub use racket::{Bat, Impact, RacketModel, RacketParams, Regime};
 pub use table::Table;
 
 /// A 3-vector in SI units in the table frame.

@@ -30,6 +30,14 @@ use topspin_core::rsi::codec::{KukaPose, RobFrame, SenFrame};
 use topspin_core::rsi::session::SessionEvent;
 use topspin_core::time::{Duration, Instant};
 
+/// A bat's orientation with its z axis turned onto its x axis (a quarter
+/// turn about y): the cylinder drawn for the bat lies along z, the face's
+/// normal along x.
+fn face_axis(q: fm::Quaternion) -> fm::Quaternion {
+    let h = std::f64::consts::FRAC_1_SQRT_2;
+    super::qmul(q, fm::Quaternion { x: 0.0, y: h, z: 0.0, w: h })
+}
+
 /// Ball radius drawn, m.
 const BALL_RADIUS: f64 = 0.02;
 /// Bat disc radius drawn, m.
@@ -474,9 +482,10 @@ impl ViewerSink {
             p.made_at,
         );
         let mut bat = self.entity(p.made_at, FRAME_TABLE, "bat_plan");
-        // The bat face's normal is the tool's z axis: a thin cylinder along z.
+        // The bat face's normal is the tool's x axis (`EulerZyx::face_normal`):
+        // a thin cylinder, its axis (z) turned onto x.
         bat.cylinders.push(fm::CylinderPrimitive {
-            pose: Some(pose(p.position, q)),
+            pose: Some(pose(p.position, face_axis(q))),
             size: Some(v3(Vec3::new(2.0 * BAT_RADIUS, 2.0 * BAT_RADIUS, 0.01))),
             bottom_scale: 1.0,
             top_scale: 1.0,
@@ -563,8 +572,9 @@ impl ViewerSink {
         ] {
             let Some(k) = k else { continue };
             let mut e = fm::SceneEntity { lifetime, ..self.entity(at, FRAME_BASE, id) };
+            let face = kuka_pose(&k);
             e.cylinders.push(fm::CylinderPrimitive {
-                pose: Some(kuka_pose(&k)),
+                pose: Some(fm::Pose { orientation: face.orientation.map(face_axis), ..face }),
                 size: Some(v3(Vec3::new(2.0 * BAT_RADIUS, 2.0 * BAT_RADIUS, 0.008))),
                 bottom_scale: 1.0,
                 top_scale: 1.0,

@@ -1,0 +1,605 @@
+//! Aiming the return: the face tilt and heading that send the ball, hit by
+//! the planned bat velocity at the predicted hitting point with its
+//! predicted spin, onto a target on the opponent's half — the racket
+//! contact model ([`RacketModel`]) inverted through the return's flight.
+//!
+//! The unknowns are the face's tilt θ (the elevation of its normal, the
+//! Euler angle b in T) and its heading ψ (the angle a); the bat moves along
+//! the face's normal, through the ball, at the slowest of [`SPEED_STEPS`]
+//! speeds (`strike.aim_bat_speed`) that lands the ball. For a guess, the
+//! contact model gives the ball's velocity and spin after the hit, and the
+//! flight model flies it (RK4 at [`AIM_STEP`]) down to the table's height;
+//! a quasi-Newton step (Broyden's update of a finite-difference Jacobian)
+//! moves (θ, ψ) so the landing point meets the target. A return that would
+//! not clear the net by [`NET_CLEARANCE`] is re-aimed [`DEEPER`] further
+//! back. θ stays within `strike.aim_tilt_deg`.
+//!
+//! Where the arm is known ([`AimBounds::within`], from the estimator's
+//! [`ReachMap`]), θ also stays within the tilts the arm can present at the
+//! hitting point, and each speed is capped at what its axes deliver along
+//! the face's normal there ([`ArmReach::cap`]): the generator would slow a
+//! faster bat, and the return would land short of where it was aimed.
+//!
+//! Bounded and allocation-free: at most [`AIM_BUDGET`] flights per plan,
+//! each of at most [`AIM_T_MAX`]. The search is resumed by the next plan
+//! for the same ball (its face, speed and Jacobian): an unconverged aim is
+//! the best face found so far, a refinement usually costs one or two
+//! flights, and none when the prediction has hardly moved.
+
+use crate::calib::StrikeCalib;
+use crate::motion::reach::{ReachMap, SpeedCaps};
+use crate::physics::{BallState, Propagator, RacketModel, Vec3};
+
+/// RK4 step of the return's flight while aiming, s: its landing is within
+/// a centimetre of the 4 ms propagator's, at a fifth of the cost
+/// (`fly_is_the_propagators_flight`).
+pub(crate) const AIM_STEP: f64 = 0.02;
+/// Longest return flight followed while aiming, s.
+pub(crate) const AIM_T_MAX: f64 = 1.5;
+/// Returns flown per plan at most (the estimator's hot path: a flight
+/// costs a few microseconds); an aim not converged within it goes on with
+/// the next observation's plan.
+pub const AIM_BUDGET: usize = 3;
+/// Returns flown at one speed without landing the ball before a faster
+/// bat is tried.
+pub(crate) const LEVEL_FLIGHTS: usize = 10;
+/// A landing this close to the target ends the search, m.
+pub(crate) const AIM_TOLERANCE: f64 = 0.03;
+/// The least height of the ball's bottom over the net's top, m: room for
+/// what the prediction gets wrong (a backspin ball's spin 20 % low drops
+/// the return by several centimetres at the net).
+pub(crate) const NET_CLEARANCE: f64 = 0.10;
+/// How much further back a return that grazes the net is aimed, m.
+pub(crate) const DEEPER: f64 = 0.25;
+/// A landing this close to the target that does not clear the net moves
+/// the target back, m.
+const RETARGET_NEAR: f64 = 0.2;
+/// Largest change of θ or ψ in one step, rad (10°).
+const MAX_STEP: f64 = 0.1745;
+/// The heading's bound, rad (the workspace allows ±45° about home).
+const MAX_HEADING: f64 = 0.7;
+/// ∂x/∂θ above −this (m/rad) is the lob side of the landing's turn.
+const LOB_SLOPE: f64 = 0.5;
+/// Finite-difference step for the first Jacobian, rad (1°).
+const FD_STEP: f64 = 0.01745;
+
+/// Where a return comes down.
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub struct Landing {
+    /// Where the ball's centre comes down to one radius over the table, m.
+    pub x: f64,
+    /// …and its y, m.
+    pub y: f64,
+    /// Height of the ball's bottom over the net's top where it crosses
+    /// x = 0, m (−∞ when it never does).
+    pub over_net: f64,
+}
+
+/// One aim: the face and where the model says the ball lands, and the
+/// search behind it (resumed by the next refinement).
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub struct Aim {
+    /// Face tilt θ (Euler b in T), rad: > 0 open.
+    pub tilt: f64,
+    /// Face heading ψ (Euler a in T), rad: the face normal's horizontal
+    /// part points along (−cos ψ, −sin ψ).
+    pub heading: f64,
+    /// Where the return lands in the model.
+    pub landing: Landing,
+    /// Bat speed, m/s.
+    pub speed: f64,
+    /// Which of the [`SPEED_STEPS`] speeds.
+    pub speed_step: usize,
+    /// The predicted ball it was aimed for.
+    pub ball: BallState,
+    /// Returns flown by the call that made this aim.
+    pub flights: usize,
+    /// The target aimed at (moved back where the net was in the way), m.
+    pub target: [f64; 2],
+    /// The landing is within [`AIM_TOLERANCE`] of the target and the net
+    /// is cleared.
+    pub converged: bool,
+    /// Where the search stands: (θ, ψ), the speed step, and ∂(landing x,
+    /// y)/∂(θ, ψ) there (`None`: to be measured).
+    search: [f64; 2],
+    level: usize,
+    jacobian: Option<[[f64; 2]; 2]>,
+    /// Returns flown at this speed since it last landed the ball.
+    tries: usize,
+    /// The face has landed the ball at least once.
+    settled: bool,
+    /// Until it has: the nearest clear landing so far (miss, face, speed
+    /// step, landing).
+    best: Option<(f64, [f64; 2], usize, Landing)>,
+}
+
+/// The face's outward normal for tilt θ and heading ψ (Euler a = ψ,
+/// b = θ in T; [`crate::plan::EulerZyx::face_normal`]).
+pub fn face_normal(tilt: f64, heading: f64) -> Vec3 {
+    let (st, ct) = tilt.sin_cos();
+    let (sp, cp) = heading.sin_cos();
+    Vec3::new(-cp * ct, -sp * ct, st)
+}
+
+/// The bat's velocity for tilt θ and heading ψ at `speed`: along the
+/// face's normal, through the ball. (Moving horizontally instead, an open
+/// face slides down past the ball and a closed one up, which drives a slow
+/// backspin ball into the net and lifts topspin further.)
+pub fn bat_velocity(tilt: f64, heading: f64, speed: f64) -> Vec3 {
+    face_normal(tilt, heading) * speed
+}
+
+/// Flies a return from `s` (just after the hit) until its centre comes
+/// down to one radius over the table (a lob still up after [`AIM_T_MAX`]
+/// "lands" where it is then, so the landing moves continuously with the
+/// stroke); `None` if the state stops being finite.
+pub fn fly(prop: &Propagator, s: &BallState) -> Option<Landing> {
+    let r = prop.flight.radius();
+    let net_top = prop.table.net_height;
+    let mut s = *s;
+    let mut over_net = f64::NEG_INFINITY;
+    let mut t = 0.0;
+    while t < AIM_T_MAX {
+        let next = prop.rk4(&s, AIM_STEP);
+        if !next.is_finite() {
+            return None;
+        }
+        if (s.pos.x > 0.0) != (next.pos.x > 0.0) {
+            let u = s.pos.x / (s.pos.x - next.pos.x);
+            over_net = s.pos.z + u * (next.pos.z - s.pos.z) - r - net_top;
+        }
+        if next.pos.z <= r && next.vel.z < 0.0 {
+            let u = ((s.pos.z - r) / (s.pos.z - next.pos.z)).clamp(0.0, 1.0);
+            let p = s.pos + (next.pos - s.pos) * u;
+            return Some(Landing { x: p.x, y: p.y, over_net });
+        }
+        s = next;
+        t += AIM_STEP;
+    }
+    Some(Landing { x: s.pos.x, y: s.pos.y, over_net })
+}
+
+/// Where the ball `ball` lands when the face has tilt θ and heading ψ and
+/// the bat moves at `speed` (`None`: no contact, or no landing).
+pub fn landing(
+    prop: &Propagator,
+    racket: &RacketModel,
+    ball: &BallState,
+    tilt: f64,
+    heading: f64,
+    speed: f64,
+) -> Option<Landing> {
+    let n = face_normal(tilt, heading);
+    let impact = racket.hit(ball, &n, &(n * speed))?;
+    fly(prop, &impact.after)
+}
+
+/// What the aim may vary: the face's tilt (rad) and the bat's speed (m/s).
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub struct AimBounds {
+    /// Tilt θ from most closed (< 0) to most open (> 0), rad.
+    pub tilt: (f64, f64),
+    /// Bat speed from the stroke's own to the fastest allowed, m/s.
+    pub speed: (f64, f64),
+    /// What the arm delivers at the hitting point (`None`: no arm, the
+    /// bounds alone).
+    pub arm: Option<ArmReach>,
+}
+
+/// The fastest bat the arm delivers along the face's normal at one
+/// hitting point, per face tilt ([`ReachMap::caps_at`]; 0: it cannot
+/// present that face there).
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub struct ArmReach {
+    /// The first tilt, rad.
+    pub tilt0: f64,
+    /// The step between tilts, rad.
+    pub step: f64,
+    /// How many of `caps` hold tilts.
+    pub n: usize,
+    /// The fastest bat per tilt, m/s.
+    pub caps: SpeedCaps,
+    /// The blade's roll (Euler c in T) that gives it, per tilt, rad.
+    pub rolls: SpeedCaps,
+}
+
+impl ArmReach {
+    /// The map's caps at (y, z).
+    pub fn at(map: &ReachMap, y: f64, z: f64) -> Self {
+        let (caps, rolls) = map.caps_at(y, z);
+        ArmReach {
+            tilt0: map.tilt(0),
+            step: crate::motion::reach::REACH_TILT_STEP_DEG.to_radians(),
+            n: map.tilts(),
+            caps,
+            rolls,
+        }
+    }
+
+    /// The blade's roll for tilt θ: the nearest tilt's.
+    pub fn roll(&self, tilt: f64) -> f64 {
+        if self.n == 0 {
+            return 0.0;
+        }
+        let k = ((tilt - self.tilt0) / self.step).round().clamp(0.0, (self.n - 1) as f64) as usize;
+        self.rolls[k]
+    }
+
+    /// The fastest bat at tilt θ: linear between the two tilts around it,
+    /// 0 if either cannot be presented.
+    pub fn cap(&self, tilt: f64) -> f64 {
+        if self.n == 0 {
+            return 0.0;
+        }
+        let u = ((tilt - self.tilt0) / self.step).clamp(0.0, (self.n - 1) as f64);
+        let k = (u.floor() as usize).min(self.n - 1);
+        let k1 = (k + 1).min(self.n - 1);
+        let (a, b) = (self.caps[k], self.caps[k1]);
+        if a <= 0.0 || b <= 0.0 {
+            return 0.0;
+        }
+        a + (b - a) * (u - k as f64)
+    }
+
+    /// The longest run of tilts the arm can present (the one nearer an
+    /// upright face among equals), rad; `None`: none.
+    pub fn tilts(&self) -> Option<(f64, f64)> {
+        let mut best: Option<(usize, usize)> = None;
+        let mut k = 0;
+        while k < self.n {
+            if self.caps[k] <= 0.0 {
+                k += 1;
+                continue;
+            }
+            let start = k;
+            while k < self.n && self.caps[k] > 0.0 {
+                k += 1;
+            }
+            let run = (start, k - 1);
+            let tilt = |i: usize| self.tilt0 + i as f64 * self.step;
+            let off = |r: (usize, usize)| tilt(r.0).max(-tilt(r.1)).max(0.0);
+            let better = best.is_none_or(|b| {
+                let (len, blen) = (run.1 - run.0, b.1 - b.0);
+                len > blen || (len == blen && off(run) < off(b))
+            });
+            if better {
+                best = Some(run);
+            }
+        }
+        best.map(|(a, b)| (self.tilt0 + a as f64 * self.step, self.tilt0 + b as f64 * self.step))
+    }
+}
+
+impl AimBounds {
+    /// The cell's bounds: `strike.aim_tilt_deg` and `strike.aim_bat_speed`.
+    pub fn of(cal: &StrikeCalib) -> Self {
+        let [closed, open] = cal.aim_tilt_deg.map(f64::to_radians);
+        let [slow, fast] = cal.aim_bat_speed;
+        AimBounds { tilt: (closed, open), speed: (slow, fast.max(slow)), arm: None }
+    }
+
+    /// These bounds where the arm has `arm`: the tilts it can present
+    /// (where it can present any), each speed at most what it delivers.
+    pub fn within(&self, arm: ArmReach) -> Self {
+        let tilt = match arm.tilts() {
+            Some((lo, hi)) if lo.max(self.tilt.0) <= hi.min(self.tilt.1) => (lo.max(self.tilt.0), hi.min(self.tilt.1)),
+            _ => self.tilt,
+        };
+        AimBounds { tilt, arm: Some(arm), ..*self }
+    }
+
+    /// The `k`-th of the [`SPEED_STEPS`] bat speeds, slowest first, at
+    /// face tilt θ: no faster than the arm delivers there (the generator
+    /// would slow it to that).
+    pub fn speed(&self, k: usize, tilt: f64) -> f64 {
+        let (lo, hi) = self.speed;
+        let v = lo + (hi - lo) * k as f64 / (SPEED_STEPS - 1) as f64;
+        match self.arm {
+            Some(a) if a.cap(tilt) > 0.0 => v.min(a.cap(tilt)),
+            _ => v,
+        }
+    }
+}
+
+/// Bat speeds tried, slowest first: the slowest bat that lands the ball
+/// sends it back slowest, and the slower the return, the less its landing
+/// moves with what the prediction got wrong (a fast topspin ball's spin is
+/// known to 10–15 % at best: its lift saturates). A faster bat only where
+/// the face alone cannot land the ball (slow backspin).
+pub(crate) const SPEED_STEPS: usize = 4;
+
+/// A new prediction this close to the last converged aim's keeps that
+/// aim: position, m; velocity, m/s; spin, rad/s (each moves the landing by
+/// under 1–3 cm).
+const REAIM_POS: f64 = 0.005;
+const REAIM_VEL: f64 = 0.02;
+const REAIM_SPIN: f64 = 5.0;
+
+/// Aims the return of `ball` (the predicted state at the hit) at
+/// `target` (x, y in T): resumes the search of `warm` (the last aim for
+/// this ball) or starts one from tilt `tilt0` and the heading at the
+/// target, and flies at most `budget` returns (at least 3 for a start);
+/// an aim not yet converged is the best face found so far, and the next
+/// call goes on from where this one stopped.
+#[allow(clippy::too_many_arguments)]
+pub fn aim(
+    bounds: &AimBounds,
+    target: [f64; 2],
+    prop: &Propagator,
+    racket: &RacketModel,
+    ball: &BallState,
+    tilt0: f64,
+    warm: Option<&Aim>,
+    budget: usize,
+) -> Aim {
+    let (lo, hi) = bounds.tilt;
+    if let Some(w) = warm
+        && w.converged
+        && (w.ball.pos - ball.pos).norm() < REAIM_POS
+        && (w.ball.vel - ball.vel).norm() < REAIM_VEL
+        && (w.ball.spin - ball.spin).norm() < REAIM_SPIN
+    {
+        return Aim { flights: 0, ..*w };
+    }
+    let clamp = |p: [f64; 2]| [p[0].clamp(lo, hi), p[1].clamp(-MAX_HEADING, MAX_HEADING)];
+    let mut target = warm.map_or(target, |w| w.target);
+    let start = |target: &[f64; 2]| clamp([tilt0, (ball.pos.y - target[1]).atan2(ball.pos.x - target[0])]);
+    let (mut p, mut level, mut jac, mut tries) =
+        warm.map_or((start(&target), 0, None, 0), |w| (w.search, w.level, w.jacobian, w.tries));
+    let mut left = budget;
+    let mut flown = 0;
+    let fly_at = |p: &[f64; 2], level: usize, left: &mut usize, flown: &mut usize| {
+        *left = left.saturating_sub(1);
+        *flown += 1;
+        landing(prop, racket, ball, p[0], p[1], bounds.speed(level, p[0]))
+    };
+    // A landing as a point (no contact: nowhere useful, far along +x).
+    let point = |l: &Option<Landing>| l.map_or([100.0, 0.0], |l| [l.x, l.y]);
+    let mut here: Option<Option<Landing>> = None;
+    // The best clear landing of this call: (miss, face, level, landing).
+    let mut best: Option<(f64, [f64; 2], usize, Landing)> = warm.and_then(|w| w.best);
+    let mut converged = false;
+    while left > 0 {
+        let now = *here.get_or_insert_with(|| fly_at(&p, level, &mut left, &mut flown));
+        let j = match jac {
+            Some(j) => j,
+            None if left >= 2 => {
+                let f0 = point(&now);
+                let ft = point(&fly_at(&[p[0] + FD_STEP, p[1]], level, &mut left, &mut flown));
+                let fh = point(&fly_at(&[p[0], p[1] + FD_STEP], level, &mut left, &mut flown));
+                let j = [
+                    [(ft[0] - f0[0]) / FD_STEP, (fh[0] - f0[0]) / FD_STEP],
+                    [(ft[1] - f0[1]) / FD_STEP, (fh[1] - f0[1]) / FD_STEP],
+                ];
+                jac = Some(j);
+                j
+            }
+            None => break,
+        };
+        let f = point(&now);
+        let clear = now.is_some_and(|l| l.over_net >= NET_CLEARANCE);
+        let mut res = [f[0] - target[0], f[1] - target[1]];
+        if !clear && res[0].hypot(res[1]) < RETARGET_NEAR && target[0] - DEEPER > -prop.table.length / 2.0 {
+            // On target but under (or into) the net: aim further back.
+            target[0] -= DEEPER;
+            res[0] += DEEPER;
+        }
+        let err = res[0].hypot(res[1]);
+        if let Some(l) = now
+            && clear
+            && best.is_none_or(|b| err < b.0)
+        {
+            best = Some((err, p, level, l));
+        }
+        if clear && err < AIM_TOLERANCE {
+            converged = true;
+            // This speed does it: its count starts again.
+            tries = 0;
+            flown = 0;
+            break;
+        }
+        // Newton step on the current Jacobian, bounded. Opening the face
+        // sends the ball longer (∂x/∂θ < 0) until the return becomes a lob
+        // that comes down shorter again. On that side, close the face by a
+        // full step; at the turn, a ball still short of the target is out
+        // of this speed's reach.
+        let det = j[0][0] * j[1][1] - j[0][1] * j[1][0];
+        let slope = j[0][0];
+        let d = if slope.abs() <= LOB_SLOPE && res[0] > 0.0 {
+            [0.0, 0.0]
+        } else if slope > -LOB_SLOPE || det.abs() <= 1e-9 || det.is_nan() {
+            [-MAX_STEP, if j[1][1].abs() > 1e-9 { (-res[1] / j[1][1]).clamp(-MAX_STEP, MAX_STEP) } else { 0.0 }]
+        } else {
+            [
+                (-(j[1][1] * res[0] - j[0][1] * res[1]) / det).clamp(-MAX_STEP, MAX_STEP),
+                (-(-j[1][0] * res[0] + j[0][0] * res[1]) / det).clamp(-MAX_STEP, MAX_STEP),
+            ]
+        };
+        let next = clamp([p[0] + d[0], p[1] + d[1]]);
+        let step = [next[0] - p[0], next[1] - p[1]];
+        let norm2 = step[0] * step[0] + step[1] * step[1];
+        let last = level + 1 >= SPEED_STEPS;
+        if norm2 < 1e-12 || (tries + flown >= LEVEL_FLIGHTS && !last) {
+            // Out of reach, against a bound, or not landing it after
+            // LEVEL_FLIGHTS: a faster bat, from the start.
+            if last {
+                break;
+            }
+            level += 1;
+            p = start(&target);
+            jac = None;
+            here = None;
+            tries = 0;
+            flown = 0;
+            continue;
+        }
+        let there = fly_at(&next, level, &mut left, &mut flown);
+        let g = point(&there);
+        // Broyden: J += (Δf − J Δp) Δpᵀ / |Δp|².
+        let df = [g[0] - f[0], g[1] - f[1]];
+        let mut j = j;
+        for (i, row) in j.iter_mut().enumerate() {
+            let miss = df[i] - (row[0] * step[0] + row[1] * step[1]);
+            for (k, x) in row.iter_mut().enumerate() {
+                *x += miss * step[k] / norm2;
+            }
+        }
+        jac = Some(j);
+        p = next;
+        here = Some(there);
+    }
+    let unknown = Landing { x: f64::NAN, y: f64::NAN, over_net: f64::NEG_INFINITY };
+    // The face: where the search converged; until it does again, the last
+    // converged one (it landed a ball very like this one); before any, the
+    // nearest clear landing found, or the start.
+    let settled = converged || warm.is_some_and(|w| w.settled);
+    let (face, out_level, landing) = match (converged, warm) {
+        (true, _) => (p, level, here.flatten().unwrap_or(unknown)),
+        (false, Some(w)) if w.settled => ([w.tilt, w.heading], w.speed_step, w.landing),
+        _ => best.map_or((start(&target), 0, unknown), |(_, bp, bl, l)| (bp, bl, l)),
+    };
+    Aim {
+        tilt: face[0],
+        heading: face[1],
+        landing,
+        speed: bounds.speed(out_level, face[0]),
+        speed_step: out_level,
+        ball: *ball,
+        target,
+        converged,
+        search: p,
+        level,
+        jacobian: jac,
+        tries: tries + flown,
+        flights: budget - left,
+        settled,
+        best: if converged { None } else { best },
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::calib::Calibration;
+    use crate::physics::{Event, StopAt};
+
+    fn cell() -> (AimBounds, [f64; 2], Propagator, RacketModel) {
+        let cal = Calibration::default_cell();
+        let bounds = AimBounds::of(&cal.strike);
+        (bounds, cal.strike.aim_target, cal.propagator(), cal.racket_model())
+    }
+
+    /// The search's start, as the estimator gives it: the paper's β.
+    fn tilt0(b: &BallState) -> f64 {
+        -crate::estimator::stroke::paper_beta(&Calibration::default_cell().strike, &b.spin)
+    }
+
+    /// Balls at the hitting plane as the launcher's settings bring them
+    /// (`topspin sim`: truth.hit).
+    fn balls() -> [BallState; 5] {
+        let at = |y: f64, z: f64, v: [f64; 3], w: [f64; 3]| {
+            BallState::new(Vec3::new(1.6, y, z), Vec3::from(v), Vec3::from(w))
+        };
+        [
+            at(0.0, 0.25, [7.4, -0.2, 1.1], [14.0, 547.0, -13.0]), // topspin-high
+            at(0.3, 0.20, [3.4, -0.4, -0.4], [-30.0, -239.0, 3.0]), // backspin-medium
+            at(-0.4, 0.22, [4.9, -1.8, 0.1], [7.0, -32.0, -429.0]), // sidespin-high
+            at(0.5, 0.34, [3.8, 1.0, -0.3], [-59.0, 213.0, -6.0]), // topspin-low
+            at(-0.2, 0.35, [2.9, 0.4, 0.4], [-59.0, -1.0, 175.0]), // sidespin-low
+        ]
+    }
+
+    #[test]
+    fn the_aimed_return_lands_on_the_target_in_the_full_physics() {
+        let (bounds, target, prop, racket) = cell();
+        for b in balls() {
+            let a = aim(&bounds, target, &prop, &racket, &b, tilt0(&b), None, 64);
+            assert!(a.converged, "{a:?} for {b:?}");
+            // Fly it with the propagator itself (4 ms, events): it clears the
+            // net and bounces within 5 cm of the target.
+            let n = face_normal(a.tilt, a.heading);
+            let mut s = racket.hit(&b, &n, &bat_velocity(a.tilt, a.heading, a.speed)).unwrap().after;
+            let mut t = 0.0;
+            let e = prop.advance(&mut s, &mut t, &StopAt { t_max: 3.0, hit_plane_x: None, net: true });
+            let Event::Bounce { before, .. } = e else { panic!("{e:?} for {b:?}") };
+            let miss = (before.pos.x - a.target[0]).hypot(before.pos.y - a.target[1]);
+            assert!(miss < 0.05, "landed {:?}, target {:?}", before.pos, a.target);
+            assert!(a.target[0] < 0.0 && a.landing.over_net >= NET_CLEARANCE);
+            assert!(a.tilt >= bounds.tilt.0 && a.tilt <= bounds.tilt.1);
+            assert!(a.speed >= bounds.speed.0 && a.speed <= bounds.speed.1);
+        }
+    }
+
+    #[test]
+    fn topspin_gets_a_closed_face_backspin_an_open_one_and_a_faster_bat() {
+        let (bounds, target, prop, racket) = cell();
+        let b = balls();
+        let top = aim(&bounds, target, &prop, &racket, &b[0], tilt0(&b[0]), None, 64);
+        let back = aim(&bounds, target, &prop, &racket, &b[1], tilt0(&b[1]), None, 64);
+        assert!(
+            top.tilt < -0.3 && back.tilt > 0.3,
+            "top {:.1}°, back {:.1}°",
+            top.tilt.to_degrees(),
+            back.tilt.to_degrees()
+        );
+        // The slow backspin ball needs more than the face: a faster bat.
+        assert!(top.speed < back.speed, "{top:?} {back:?}");
+        // A ball on the +y side is sent back towards the middle: the face
+        // turns towards −y (ψ > 0), and from −y towards +y.
+        let plus = aim(&bounds, target, &prop, &racket, &b[3], tilt0(&b[3]), None, 64);
+        let minus = aim(&bounds, target, &prop, &racket, &b[4], tilt0(&b[4]), None, 64);
+        assert!(plus.heading > 0.0 && minus.heading < 0.0, "{plus:?} {minus:?}");
+    }
+
+    #[test]
+    fn a_refinement_starts_from_the_last_aim() {
+        let (bounds, target, prop, racket) = cell();
+        let b = balls()[0];
+        let first = aim(&bounds, target, &prop, &racket, &b, tilt0(&b), None, 64);
+        let mut moved = b;
+        moved.pos.z += 0.01;
+        moved.vel.x += 0.05;
+        let again = aim(&bounds, target, &prop, &racket, &moved, tilt0(&moved), Some(&first), AIM_BUDGET);
+        assert!(again.converged);
+        assert!((again.tilt - first.tilt).abs() < 0.05);
+        assert_eq!(again.speed_step, first.speed_step);
+    }
+
+    #[test]
+    fn fly_is_the_propagators_flight() {
+        let (_, _, prop, _) = cell();
+        let s = BallState::new(Vec3::new(1.6, 0.1, 0.3), Vec3::new(-6.5, -0.3, 1.5), Vec3::new(0.0, -150.0, 40.0));
+        let l = fly(&prop, &s).unwrap();
+        let (mut e, mut t) = (s, 0.0);
+        let ev = prop.advance(&mut e, &mut t, &StopAt { t_max: 2.0, hit_plane_x: None, net: false });
+        let Event::Bounce { before, .. } = ev else { panic!("{ev:?}") };
+        assert!((l.x - before.pos.x).hypot(l.y - before.pos.y) < 0.01, "{l:?} vs {:?}", before.pos);
+        assert!(l.over_net > 0.0);
+    }
+
+    #[test]
+    fn a_plan_flies_at_most_its_budget() {
+        let (bounds, target, prop, racket) = cell();
+        let mut warm = None;
+        for b in balls() {
+            for k in 0..6 {
+                let mut s = b;
+                s.spin *= 1.0 + 0.02 * k as f64;
+                let a = aim(&bounds, target, &prop, &racket, &s, tilt0(&s), warm.as_ref(), AIM_BUDGET);
+                assert!(a.flights <= AIM_BUDGET, "{a:?}");
+                warm = Some(a);
+            }
+            warm = None;
+        }
+    }
+
+    #[test]
+    fn the_aim_stays_within_its_bounds() {
+        let (bounds, target, prop, racket) = cell();
+        // Heavy backspin, slow and low: wants more than the bounds give.
+        let b = BallState::new(Vec3::new(1.6, 0.0, 0.16), Vec3::new(2.0, 0.0, -1.0), Vec3::new(0.0, -900.0, 0.0));
+        let a = aim(&bounds, target, &prop, &racket, &b, tilt0(&b), None, 64);
+        assert!(a.tilt >= bounds.tilt.0 && a.tilt <= bounds.tilt.1, "{a:?}");
+        assert!(a.heading.abs() <= MAX_HEADING && a.speed <= bounds.speed.1, "{a:?}");
+    }
+}
