@@ -23,11 +23,37 @@ pub struct LearnConfig {
     pub memory: u32,
     /// Fewest samples a measurement is made from.
     pub min_samples: usize,
+    /// Weight of a ball's own drag, read from its flight so far, against
+    /// the session's for the rest of that ball's flight (0: the session's
+    /// alone; balls differ by their surface and seam).
+    pub ball_drag_weight: f64,
+    /// The ball's own drag is reread every this many accepted samples
+    /// before its bounce (and at the bounce).
+    pub ball_drag_every: usize,
 }
 
 impl Default for LearnConfig {
     fn default() -> Self {
-        LearnConfig { enabled: true, memory: 8, min_samples: 12 }
+        LearnConfig { enabled: true, memory: 8, min_samples: 12, ball_drag_weight: 0.5, ball_drag_every: 8 }
+    }
+}
+
+impl LearnConfig {
+    /// Nothing learned: every ball flies with the calibration.
+    pub const OFF: LearnConfig =
+        LearnConfig { enabled: false, memory: 8, min_samples: 12, ball_drag_weight: 0.0, ball_drag_every: 8 };
+
+    /// The drag multiplier one ball flies with: the session's, moved
+    /// towards the ball's own measurement by [`Self::ball_drag_weight`],
+    /// within the session's bounds.
+    pub fn ball_drag(&self, session: &Learned, measured: Option<f64>) -> f64 {
+        match measured {
+            Some(m) if m.is_finite() && self.ball_drag_weight > 0.0 => {
+                let own = m.clamp(session.bounds.0, session.bounds.1);
+                session.value + self.ball_drag_weight.min(1.0) * (own - session.value)
+            }
+            _ => session.value,
+        }
     }
 }
 
