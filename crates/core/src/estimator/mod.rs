@@ -468,7 +468,7 @@ impl Estimator {
                     if cfg.learn.enabled
                         && cfg.learn.ball_drag_weight > 0.0
                         && n >= cfg.learn.min_samples
-                        && n % cfg.learn.ball_drag_every.max(1) == 0
+                        && n.is_multiple_of(cfg.learn.ball_drag_every.max(1))
                         && !track.window.is_full()
                     {
                         // This ball's own drag so far (one cubic over the window).

@@ -7,8 +7,10 @@
 //! new configuration).
 //!
 //! The measurements are closed-form and bounded in work (one cubic over a
-//! window), made once per ball: the drag when the ball bounces, the table
-//! when its track ends.
+//! window): the session's drag once per ball when it bounces, the table
+//! when its track ends; a ball's own drag (weighed against the session's
+//! for the rest of its flight, [`LearnConfig::ball_drag_weight`]) every
+//! [`LearnConfig::ball_drag_every`] samples before its bounce.
 
 use crate::fit::Sample;
 use crate::fit::poly::Cubic;
@@ -218,6 +220,19 @@ mod tests {
         let d = drag_from_flight(&samples, &cal.propagator().flight, 12).unwrap();
         assert!((d - 1.3).abs() < 0.03, "{d}");
         assert_eq!(drag_from_flight(&samples[..5], &cal.propagator().flight, 12), None);
+    }
+
+    #[test]
+    fn a_ball_flies_with_its_own_drag_weighed_against_the_sessions() {
+        let mut s = Session::new(&BounceModel::new(0.95, 0.14, 0.02));
+        s.drag.value = 1.1;
+        let cfg = LearnConfig { ball_drag_weight: 0.5, ..LearnConfig::default() };
+        assert!((cfg.ball_drag(&s.drag, Some(1.3)) - 1.2).abs() < 1e-12);
+        // A wild measurement counts only up to the session's bound (1.8).
+        assert!((cfg.ball_drag(&s.drag, Some(5.0)) - 1.45).abs() < 1e-12);
+        assert_eq!(cfg.ball_drag(&s.drag, None), 1.1);
+        assert_eq!(cfg.ball_drag(&s.drag, Some(f64::NAN)), 1.1);
+        assert_eq!(LearnConfig { ball_drag_weight: 0.0, ..cfg }.ball_drag(&s.drag, Some(1.3)), 1.1);
     }
 
     #[test]
