@@ -36,7 +36,7 @@ pub struct LearnConfig {
 
 impl Default for LearnConfig {
     fn default() -> Self {
-        LearnConfig { enabled: true, memory: 8, min_samples: 12, ball_drag_weight: 0.5, ball_drag_every: 8 }
+        LearnConfig { enabled: true, memory: 24, min_samples: 12, ball_drag_weight: 0.5, ball_drag_every: 8 }
     }
 }
 
@@ -251,7 +251,7 @@ mod tests {
         let before = s;
         s.take_drag(50.0, &cfg);
         s.restitution.take(f64::NAN, cfg.memory);
-        assert!(s.drag.value - before.drag.value <= 0.3 / 9.0 + 1e-12);
+        assert!(s.drag.value - before.drag.value <= 0.3 / f64::from(cfg.memory + 1) + 1e-12);
         assert_eq!(s.restitution, before.restitution);
         for _ in 0..100 {
             s.take_drag(50.0, &cfg);
