@@ -245,7 +245,8 @@ mod tests {
             s.take_bounce(&before, &after, 0.02, &cfg);
         }
         assert!((s.restitution.value - 0.88).abs() < 0.005 && (s.friction.value - 0.3).abs() < 0.01, "{s:?}");
-        for _ in 0..20 {
+        // Past the memory: a new ball weighs 1/(memory + 1).
+        for _ in 0..cfg.memory + 4 {
             s.take_drag(1.1, &cfg);
         }
         let before = s;
