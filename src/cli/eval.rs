@@ -236,6 +236,9 @@ fn run_stream(a: EvalStreamArgs) -> anyhow::Result<()> {
     if !(0.0..1.0).contains(&a.dropout) {
         return Err(BadInput(format!("--dropout {} must be in [0, 1)", a.dropout)).into());
     }
+    if a.set.balls == 0 {
+        return Err(BadInput("--balls 0: a stream needs at least one ball".to_owned()).into());
+    }
     let world = match &a.world {
         Some(name) => Some(
             topspin_sim::worlds::world_named(&cal, name)
