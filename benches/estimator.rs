@@ -94,6 +94,18 @@ fn benches(c: &mut Criterion) {
             }
         })
     });
+    // The same stream without a ball's own drag (read every 8 samples
+    // before its bounce): what that reading costs.
+    let mut no_ball_drag = EstimatorConfig::default();
+    no_ball_drag.learn.ball_drag_weight = 0.0;
+    c.bench_function("estimator/observe_stream_of_45_balls_without_ball_drag", |b| {
+        b.iter(|| {
+            let mut est = Estimator::new(&cal, no_ball_drag);
+            for &(t, p) in &obs {
+                black_box(est.observe(t, p));
+            }
+        })
+    });
     println!("({} observations per iteration)", obs.len());
 }
 

@@ -149,3 +149,24 @@ fn unreadable_or_broken_files_name_the_file() {
     let e = err(None, Some(&f), &[]);
     assert!(e.starts_with("tracker.noise_mm:"), "{e}");
 }
+
+#[test]
+fn the_session_learning_is_set_by_configuration() {
+    use topspin_core::estimator::session::LearnConfig;
+    // On by default, with the ball's own drag weighed at the compiled weight.
+    let on = DaemonConfig::default().estimator_config();
+    assert_eq!(on.learn, LearnConfig::default());
+    assert!(on.learn.enabled);
+    // Off: every ball flies with the calibration.
+    let off = DaemonConfig::from_toml("[estimator]\nlearn_session = false\n").unwrap();
+    assert_eq!(off.estimator_config().learn, LearnConfig::OFF);
+    let w = DaemonConfig::from_toml("[estimator]\nball_drag_weight = 0.25\n").unwrap();
+    assert_eq!(w.estimator_config().learn.ball_drag_weight, 0.25);
+    // Out of range or mistyped: refused, naming the key.
+    let e = DaemonConfig::from_toml("[estimator]\nball_drag_weight = 1.5\n").unwrap_err().to_string();
+    assert_eq!(e, "estimator.ball_drag_weight: 1.5 is not in [0, 1]");
+    let e = err(None, None, &[("TOPSPIN_ESTIMATOR__LEARN_SESSIONS", "false")]);
+    assert!(e.contains("estimator.learn_sessions"), "{e}");
+    // A configuration without the section (an older recording's) learns.
+    assert!(DaemonConfig::from_toml("[tracker]\nnoise_mm = 3.0\n").unwrap().estimator.learn_session);
+}

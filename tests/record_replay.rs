@@ -8,7 +8,7 @@ use std::path::Path;
 use std::process::{Command, Output};
 
 use topspin_core::calib::Calibration;
-use topspin_core::estimator::{Estimator, EstimatorConfig};
+use topspin_core::estimator::Estimator;
 use topspin_core::ingest::Ingest;
 use topspin_core::plan::StrikePlan;
 use topspin_core::time::Instant;
@@ -34,7 +34,7 @@ fn record(path: &Path, balls: usize) -> Recorded {
     let (sim, launches) = simulate_stream(&cal, &StreamSetup { balls, seed: 7, noise_mm: 1.5, ..Default::default() });
     let mut rec = Recorder::create(path, &cfg, &calib_files(None).unwrap()).unwrap();
     let mut ingest = Ingest::new(Some(cfg.network.tracker_source), cfg.fixed_latency_ns());
-    let mut est = Estimator::new(&cal, EstimatorConfig::default().with_noise(cfg.tracker_noise_m()));
+    let mut est = Estimator::new(&cal, cfg.estimator_config());
     let from: SocketAddr = TRACKER.parse().unwrap();
     let stranger: SocketAddr = "10.1.2.3:5555".parse().unwrap();
     let (mut seq, mut datagrams, mut plans) = (0u32, 0usize, Vec::new());

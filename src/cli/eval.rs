@@ -11,7 +11,7 @@ use super::BadInput;
 use super::fit::{PhysicsChoice, load_calibration};
 use topspin_core::stats::Summary;
 use topspin_lab::eval::fit::{MethodRow, Window, accuracy, outlier_experiment};
-use topspin_lab::eval::stream::{StreamSetup, evaluate};
+use topspin_lab::eval::stream::{LeadRow, StreamSetup, evaluate, evaluate_worlds};
 use topspin_lab::eval::worlds;
 use topspin_sim::TrackerModel;
 use topspin_sim::simulate_set;
@@ -77,6 +77,8 @@ pub struct EvalWorldsArgs {
 }
 
 #[derive(Debug, Args)]
+#[command(after_help = "Examples:\n  topspin eval stream --balls 180 --world other-table\n  \
+    topspin eval stream --balls 180 --all-worlds --json   (every world as one session, learning on and off)")]
 pub struct EvalStreamArgs {
     #[command(flatten)]
     pub set: SimSetArgs,
@@ -93,6 +95,11 @@ pub struct EvalStreamArgs {
     /// The estimator learns nothing across the session (drag, table).
     #[arg(long)]
     pub no_learning: bool,
+    /// Every world (and the calibration's own) as one session of --balls
+    /// balls, the EKF with the session learning on and off side by side:
+    /// at the net, 0.25 s and 0.15 s before the hit.
+    #[arg(long, conflicts_with_all = ["world", "no_learning"])]
+    pub all_worlds: bool,
 }
 
 pub fn run(cmd: EvalCommand) -> anyhow::Result<()> {
@@ -229,6 +236,9 @@ fn run_stream(a: EvalStreamArgs) -> anyhow::Result<()> {
     if !(0.0..1.0).contains(&a.dropout) {
         return Err(BadInput(format!("--dropout {} must be in [0, 1)", a.dropout)).into());
     }
+    if a.set.balls == 0 {
+        return Err(BadInput("--balls 0: a stream needs at least one ball".to_owned()).into());
+    }
     let world = match &a.world {
         Some(name) => Some(
             topspin_sim::worlds::world_named(&cal, name)
@@ -246,6 +256,9 @@ fn run_stream(a: EvalStreamArgs) -> anyhow::Result<()> {
         learn: !a.no_learning,
         ..Default::default()
     };
+    if a.all_worlds {
+        return run_stream_worlds(&cal, &setup, a.set.json);
+    }
     let report = evaluate(&cal, &setup);
     if a.set.json {
         println!("{}", serde_json::to_string(&report)?);
@@ -283,5 +296,54 @@ fn run_stream(a: EvalStreamArgs) -> anyhow::Result<()> {
         l.friction,
         l.bounces
     );
+    Ok(())
+}
+
+fn run_stream_worlds(cal: &topspin_core::calib::Calibration, setup: &StreamSetup, json: bool) -> anyhow::Result<()> {
+    let report = evaluate_worlds(cal, setup);
+    if json {
+        println!("{}", serde_json::to_string(&report)?);
+        return Ok(());
+    }
+    println!(
+        "Streaming estimator, every world as one session of {} balls back to back, observed through the \
+         bounce, {} mm noise, {:.0}% dropouts; the EKF's latest plan, medians (p90 in brackets) over the \
+         balls whose true hit lies inside the hitting window:\n",
+        setup.balls,
+        setup.noise_mm,
+        setup.dropout * 100.0
+    );
+    println!(
+        "| world | learning | at the net: hit mm / time ms | 0.25 s before | 0.15 s before | no plan (net) | \
+         learned drag, e, μ (truth) |"
+    );
+    println!("|---|---|---|---|---|---|---|");
+    let cell = |r: &LeadRow| {
+        format!(
+            "{:.1} ({:.1}) / {:.2} ({:.2})",
+            r.hit_err_mm.median, r.hit_err_mm.p90, r.hit_dt_ms.median, r.hit_dt_ms.p90
+        )
+    };
+    for w in &report {
+        for (learning, rows) in [("on", &w.on), ("off", &w.off)] {
+            let learned = if learning == "on" {
+                let (l, t) = (&w.learned, &w.truth);
+                format!(
+                    "{:.3}, {:.3}, {:.3} ({:.3}, {:.3}, {:.3})",
+                    l.drag_scale, l.restitution, l.friction, t.drag_scale, t.restitution, t.friction
+                )
+            } else {
+                "–".to_owned()
+            };
+            println!(
+                "| {} | {learning} | {} | {} | {} | {} | {learned} |",
+                w.world,
+                cell(&rows[0]),
+                cell(&rows[1]),
+                cell(&rows[2]),
+                rows[0].missing
+            );
+        }
+    }
     Ok(())
 }

@@ -60,6 +60,7 @@ pub fn runtime_config(c: &DaemonConfig) -> Result<RuntimeConfig, BadInput> {
         },
         estimator_busy_poll: false,
         tracker_noise: c.tracker_noise_m(),
+        learn: c.estimator_config().learn,
         tracker_fixed_latency: Duration::from_nanos(c.fixed_latency_ns()),
         sentype: c.rsi.sentype.clone(),
         log_interval_s: c.telemetry.log_interval_s,

@@ -16,6 +16,8 @@ use std::net::{IpAddr, SocketAddr};
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
+use topspin_core::estimator::EstimatorConfig;
+use topspin_core::estimator::session::LearnConfig;
 
 /// Where the system-wide configuration lives.
 pub(crate) const SYSTEM_CONFIG_PATH: &str = "/etc/topspin/topspin.toml";
@@ -172,6 +174,25 @@ pub struct TrackerConfig {
     pub fixed_latency_ms: f64,
 }
 
+/// `[estimator]`: what the streaming estimator learns across a session.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct EstimatorSection {
+    /// Learn the air's drag and the table's e and μ from the balls of the
+    /// session (false: every ball flies with the calibration, as before).
+    pub learn_session: bool,
+    /// Weight of a ball's own drag, read from its flight, against the
+    /// session's for the rest of that flight, 0..=1.
+    pub ball_drag_weight: f64,
+}
+
+impl Default for EstimatorSection {
+    fn default() -> Self {
+        let l = LearnConfig::default();
+        EstimatorSection { learn_session: l.enabled, ball_drag_weight: l.ball_drag_weight }
+    }
+}
+
 /// `[rsi]`: the RSI session.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -292,6 +313,9 @@ pub struct DaemonConfig {
     pub network: NetworkConfig,
     pub threads: ThreadsConfig,
     pub tracker: TrackerConfig,
+    /// Absent in recordings made before it existed.
+    #[serde(default)]
+    pub estimator: EstimatorSection,
     pub rsi: RsiConfig,
     pub telemetry: TelemetryConfig,
     pub recording: RecordingConfig,
@@ -324,6 +348,7 @@ impl Default for DaemonConfig {
                 rsi_wait: RsiWait::Blocking,
             },
             tracker: TrackerConfig { noise_mm: 2.0, fixed_latency_ms: 2.0 },
+            estimator: EstimatorSection::default(),
             rsi: RsiConfig { sentype: "ImFree".to_owned(), servo_compensation: true, correction: cartesian() },
             telemetry: TelemetryConfig { log_interval_s: 10.0, log_level: "info".to_owned() },
             recording: RecordingConfig { enabled: false, dir: PathBuf::from("/var/lib/topspin") },
@@ -456,6 +481,10 @@ impl DaemonConfig {
         if !(tr.fixed_latency_ms.is_finite() && (0.0..=1000.0).contains(&tr.fixed_latency_ms)) {
             return Err(invalid("tracker.fixed_latency_ms", format!("{} is not in [0, 1000] ms", tr.fixed_latency_ms)));
         }
+        let w = self.estimator.ball_drag_weight;
+        if !(w.is_finite() && (0.0..=1.0).contains(&w)) {
+            return Err(invalid("estimator.ball_drag_weight", format!("{w} is not in [0, 1]")));
+        }
         let s = &self.rsi.sentype;
         if s.is_empty() || s.len() > 64 || !s.bytes().all(|b| b.is_ascii_alphanumeric() || b == b'_' || b == b'-') {
             return Err(invalid("rsi.sentype", format!("{s:?} is not a SENTYPE (1 to 64 of A-Z a-z 0-9 _ -)")));
@@ -504,6 +533,18 @@ impl DaemonConfig {
     /// `tracker.noise_mm` in metres (for `EstimatorConfig::with_noise`).
     pub fn tracker_noise_m(&self) -> f64 {
         self.tracker.noise_mm * 1e-3
+    }
+
+    /// The estimator's settings: tuned to `tracker.noise_mm`, learning
+    /// across the session as `[estimator]` says.
+    pub fn estimator_config(&self) -> EstimatorConfig {
+        let mut cfg = EstimatorConfig::default().with_noise(self.tracker_noise_m());
+        cfg.learn = if self.estimator.learn_session {
+            LearnConfig { ball_drag_weight: self.estimator.ball_drag_weight, ..LearnConfig::default() }
+        } else {
+            LearnConfig::OFF
+        };
+        cfg
     }
 
     /// `tracker.fixed_latency_ms` in nanoseconds (for `Ingest::new`).

@@ -20,7 +20,7 @@ use crate::mock_krc::pair::Pair;
 use crate::mock_krc::{Faults, MockKrcConfig, MockResult};
 use crate::{SimBall, schedule, simulate_set};
 use topspin_core::calib::Calibration;
-use topspin_core::estimator::{Estimator, EstimatorConfig};
+use topspin_core::estimator::Estimator;
 use topspin_core::ingest::{Ingest, IngestCounters};
 use topspin_core::plan::StrikePlan;
 use topspin_core::rsi::session::{RsiSession, SessionConfig, SessionStats};
@@ -87,7 +87,7 @@ pub fn run_virtual(cfg: &DemoConfig, cal: &Calibration) -> VirtualRun {
 
     let dcfg = demo_daemon_config(cfg);
     let mut ingest = Ingest::new(cfg.runtime.tracker_source, dcfg.fixed_latency_ns());
-    let mut estimator = Estimator::new(cal, EstimatorConfig::default().with_noise(dcfg.tracker_noise_m()));
+    let mut estimator = Estimator::new(cal, dcfg.estimator_config());
     let mut session_cfg = SessionConfig::from_calibration(cal, &cfg.runtime.sentype);
     session_cfg.correction = cfg.runtime.correction;
     let session = RsiSession::new(session_cfg).expect("the calibration's session configuration is valid");

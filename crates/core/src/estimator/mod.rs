@@ -477,9 +477,11 @@ impl Estimator {
                             session::drag_from_flight(&track.window, &self.prop.flight, cfg.learn.min_samples)
                     {
                         // The air of this session, this ball's flight included,
-                        // for the rest of this flight and the next balls.
+                        // for the next balls; this ball flies on with its own
+                        // drag weighed against it.
                         self.session.take_drag(drag, &cfg.learn);
-                        let scales = FlightScales { drag: self.session.drag.value, lift: 1.0 };
+                        let scales =
+                            FlightScales { drag: cfg.learn.ball_drag(&self.session.drag, Some(drag)), lift: 1.0 };
                         track.prop.flight = self.prop.flight.scaled(scales);
                     }
                 }
@@ -494,6 +496,18 @@ impl Estimator {
                 track.rejects.clear();
                 if track.spin_before_bounce.is_none() {
                     let _ = track.window.push(sample);
+                    let n = track.window.len();
+                    if cfg.learn.enabled
+                        && cfg.learn.ball_drag_weight > 0.0
+                        && n >= cfg.learn.min_samples
+                        && n.is_multiple_of(cfg.learn.ball_drag_every.max(1))
+                        && !track.window.is_full()
+                    {
+                        // This ball's own drag so far (one cubic over the window).
+                        let own = session::drag_from_flight(&track.window, &self.prop.flight, cfg.learn.min_samples);
+                        let scales = FlightScales { drag: cfg.learn.ball_drag(&self.session.drag, own), lift: 1.0 };
+                        track.prop.flight = self.prop.flight.scaled(scales);
+                    }
                     if cfg.spin_source == SpinSource::WindowFit {
                         let prop = track.prop;
                         refit_spin(track, &prop);

@@ -7,8 +7,10 @@
 //! new configuration).
 //!
 //! The measurements are closed-form and bounded in work (one cubic over a
-//! window), made once per ball: the drag when the ball bounces, the table
-//! when its track ends.
+//! window): the session's drag once per ball when it bounces, the table
+//! when its track ends; a ball's own drag (weighed against the session's
+//! for the rest of its flight, [`LearnConfig::ball_drag_weight`]) every
+//! [`LearnConfig::ball_drag_every`] samples before its bounce.
 
 use crate::fit::Sample;
 use crate::fit::poly::Cubic;
@@ -23,11 +25,37 @@ pub struct LearnConfig {
     pub memory: u32,
     /// Fewest samples a measurement is made from.
     pub min_samples: usize,
+    /// Weight of a ball's own drag, read from its flight so far, against
+    /// the session's for the rest of that ball's flight (0: the session's
+    /// alone; balls differ by their surface and seam).
+    pub ball_drag_weight: f64,
+    /// The ball's own drag is reread every this many accepted samples
+    /// before its bounce (and at the bounce).
+    pub ball_drag_every: usize,
 }
 
 impl Default for LearnConfig {
     fn default() -> Self {
-        LearnConfig { enabled: true, memory: 8, min_samples: 12 }
+        LearnConfig { enabled: true, memory: 24, min_samples: 12, ball_drag_weight: 0.5, ball_drag_every: 8 }
+    }
+}
+
+impl LearnConfig {
+    /// Nothing learned: every ball flies with the calibration.
+    pub const OFF: LearnConfig =
+        LearnConfig { enabled: false, memory: 8, min_samples: 12, ball_drag_weight: 0.0, ball_drag_every: 8 };
+
+    /// The drag multiplier one ball flies with: the session's, moved
+    /// towards the ball's own measurement by [`Self::ball_drag_weight`],
+    /// within the session's bounds.
+    pub fn ball_drag(&self, session: &Learned, measured: Option<f64>) -> f64 {
+        match measured {
+            Some(m) if m.is_finite() && self.ball_drag_weight > 0.0 => {
+                let own = m.clamp(session.bounds.0, session.bounds.1);
+                session.value + self.ball_drag_weight.min(1.0) * (own - session.value)
+            }
+            _ => session.value,
+        }
     }
 }
 
@@ -195,6 +223,19 @@ mod tests {
     }
 
     #[test]
+    fn a_ball_flies_with_its_own_drag_weighed_against_the_sessions() {
+        let mut s = Session::new(&BounceModel::new(0.95, 0.14, 0.02));
+        s.drag.value = 1.1;
+        let cfg = LearnConfig { ball_drag_weight: 0.5, ..LearnConfig::default() };
+        assert!((cfg.ball_drag(&s.drag, Some(1.3)) - 1.2).abs() < 1e-12);
+        // A wild measurement counts only up to the session's bound (1.8).
+        assert!((cfg.ball_drag(&s.drag, Some(5.0)) - 1.45).abs() < 1e-12);
+        assert_eq!(cfg.ball_drag(&s.drag, None), 1.1);
+        assert_eq!(cfg.ball_drag(&s.drag, Some(f64::NAN)), 1.1);
+        assert_eq!(LearnConfig { ball_drag_weight: 0.0, ..cfg }.ball_drag(&s.drag, Some(1.3)), 1.1);
+    }
+
+    #[test]
     fn learning_is_bounded_and_a_bad_ball_moves_it_little() {
         let cfg = LearnConfig::default();
         let mut s = Session::new(&BounceModel::new(0.95, 0.14, 0.02));
@@ -204,13 +245,14 @@ mod tests {
             s.take_bounce(&before, &after, 0.02, &cfg);
         }
         assert!((s.restitution.value - 0.88).abs() < 0.005 && (s.friction.value - 0.3).abs() < 0.01, "{s:?}");
-        for _ in 0..20 {
+        // Past the memory: a new ball weighs 1/(memory + 1).
+        for _ in 0..cfg.memory + 4 {
             s.take_drag(1.1, &cfg);
         }
         let before = s;
         s.take_drag(50.0, &cfg);
         s.restitution.take(f64::NAN, cfg.memory);
-        assert!(s.drag.value - before.drag.value <= 0.3 / 9.0 + 1e-12);
+        assert!(s.drag.value - before.drag.value <= 0.3 / f64::from(cfg.memory + 1) + 1e-12);
         assert_eq!(s.restitution, before.restitution);
         for _ in 0..100 {
             s.take_drag(50.0, &cfg);

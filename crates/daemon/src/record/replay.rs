@@ -7,7 +7,7 @@
 use serde::Serialize;
 
 use super::{RecordError, Session, plan_floats};
-use topspin_core::estimator::{Estimator, EstimatorConfig};
+use topspin_core::estimator::Estimator;
 use topspin_core::ingest::{Ingest, IngestCounters};
 use topspin_core::plan::StrikePlan;
 
@@ -95,7 +95,7 @@ pub(crate) fn replay_plans(session: &Session) -> Result<(Vec<StrikePlan>, Ingest
     let cal = session.calibration()?;
     let cfg = &session.config;
     let mut ingest = Ingest::new(Some(cfg.network.tracker_source), cfg.fixed_latency_ns());
-    let mut est = Estimator::new(&cal, EstimatorConfig::default().with_noise(cfg.tracker_noise_m()));
+    let mut est = Estimator::new(&cal, cfg.estimator_config());
     let mut plans = Vec::new();
     for d in &session.observations {
         if let Ok(a) = ingest.accept(&d.bytes, d.from, d.arrival)

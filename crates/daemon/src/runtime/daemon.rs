@@ -85,6 +85,8 @@ pub struct RuntimeConfig {
     pub estimator_busy_poll: bool,
     /// Tracker noise σ per axis, m.
     pub tracker_noise: f64,
+    /// What the estimator learns across the session (`[estimator]`).
+    pub learn: topspin_core::estimator::session::LearnConfig,
     pub tracker_fixed_latency: Duration,
     pub sentype: String,
     pub log_interval_s: f64,
@@ -137,6 +139,7 @@ impl RuntimeConfig {
             rsi_wait: WaitStrategy::Blocking,
             estimator_busy_poll: false,
             tracker_noise: 0.002,
+            learn: topspin_core::estimator::session::LearnConfig::default(),
             tracker_fixed_latency: Duration::from_millis(2),
             sentype: "ImFree".to_owned(),
             log_interval_s: 10.0,
@@ -311,7 +314,10 @@ impl Daemon {
         let crops_addr = logo_parts.as_ref().map(|p| p.0.local_addr()).transpose()?;
 
         let estimator = {
-            let est = Estimator::new(cal, EstimatorConfig::default().with_noise(cfg.tracker_noise));
+            let est = Estimator::new(
+                cal,
+                EstimatorConfig { learn: cfg.learn, ..EstimatorConfig::default().with_noise(cfg.tracker_noise) },
+            );
             let stop = stop.clone();
             let busy = cfg.estimator_busy_poll;
             spawn("estimator", cfg.estimator, cfg.realtime, &warnings, move || {

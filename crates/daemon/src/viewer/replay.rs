@@ -9,7 +9,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use crate::record::{RecordError, Session};
 use crate::runtime::telemetry::{QUEUE_INTERVAL_S, QueueDepths, RECORDED_RSI, RsiRecord, Telemetry, TelemetrySink};
-use topspin_core::estimator::{Estimator, EstimatorConfig};
+use topspin_core::estimator::Estimator;
 use topspin_core::ingest::Ingest;
 use topspin_core::time::Duration;
 
@@ -24,7 +24,7 @@ pub fn view_session(
     let cal = session.calibration()?;
     let cfg = &session.config;
     let mut ingest = Ingest::new(Some(cfg.network.tracker_source), cfg.fixed_latency_ns());
-    let mut est = Estimator::new(&cal, EstimatorConfig::default().with_noise(cfg.tracker_noise_m()));
+    let mut est = Estimator::new(&cal, cfg.estimator_config());
     let (obs, rsi) = (&session.observations, &session.exchanges);
     let first = match (obs.first(), rsi.first()) {
         (Some(a), Some(b)) => a.arrival.min(b.arrival),

@@ -6,6 +6,7 @@
 use serde::Serialize;
 
 use topspin_core::calib::Calibration;
+use topspin_core::estimator::session::LearnConfig;
 use topspin_core::estimator::{Estimator, EstimatorConfig, SpinSource};
 use topspin_core::fit::{FitConfig, Method, Sample, fit_trajectory};
 use topspin_core::physics::Vec3;
@@ -214,4 +215,85 @@ pub fn evaluate(cal: &Calibration, setup: &StreamSetup) -> StreamReport {
     }
     let reachable = reachable.iter().filter(|r| **r).count();
     StreamReport { setup: *setup, balls: balls.len(), reachable, tracked, learned, at_net, by_lead }
+}
+
+/// Lead times of the per-world session table, s before the true hit.
+pub const SESSION_LEADS: [f64; 2] = [0.25, 0.15];
+
+/// One world flown as one session, the EKF learning and not.
+#[derive(Clone, Debug, Serialize)]
+pub struct WorldSession {
+    /// The world (`ours`: the calibration's own).
+    pub world: &'static str,
+    pub balls: usize,
+    /// Balls whose true hitting point lies inside the hitting window.
+    pub reachable: usize,
+    /// What the learning session ended with.
+    pub learned: SessionLearned,
+    /// The world's true drag multiplier (its C_D over the calibration's,
+    /// times the mean of its balls' own), e and μ.
+    pub truth: SessionLearned,
+    /// Learning on: at the net, then [`SESSION_LEADS`].
+    pub on: Vec<LeadRow>,
+    /// Learning off, on the same balls.
+    pub off: Vec<LeadRow>,
+}
+
+/// Every world of `topspin_sim::worlds` (and the calibration's own first)
+/// as one session of `setup.balls` balls back to back, observed through
+/// the bounce: the EKF's plans with the session learning on and off
+/// (`setup.world` and `setup.learn` are ignored).
+pub fn evaluate_worlds(cal: &Calibration, setup: &StreamSetup) -> Vec<WorldSession> {
+    let mut names: Vec<Option<&'static str>> = vec![None];
+    names.extend(topspin_sim::worlds::worlds(cal).iter().map(|w| Some(w.name)));
+    names.into_iter().map(|world| world_session(cal, &StreamSetup { world, ..*setup })).collect()
+}
+
+fn world_session(cal: &Calibration, setup: &StreamSetup) -> WorldSession {
+    let (balls, launches) = simulate_stream(cal, setup);
+    let base = EstimatorConfig::default().with_noise(setup.noise_mm * 1e-3);
+    let reachable: Vec<bool> = balls.iter().map(|b| topspin_sim::demo::reachable(cal, b)).collect();
+    let rows = |cfg: EstimatorConfig| -> (Vec<LeadRow>, SessionLearned) {
+        let (plans, learned) = run_estimator(cal, cfg, &balls, &launches);
+        let errs = |when: &dyn Fn(&SimBall) -> Option<f64>| -> Vec<Option<(f64, f64)>> {
+            balls
+                .iter()
+                .enumerate()
+                .filter(|(k, _)| reachable[*k])
+                .map(|(k, b)| when(b).and_then(|t| plan_error(&plans, k, launches[k] + t, b, launches[k])))
+                .collect()
+        };
+        let mut out = vec![row(f64::NAN, "ekf", errs(&|b: &SimBall| b.truth.net_crossing_t))];
+        for lead in SESSION_LEADS {
+            out.push(row(lead, "ekf", errs(&|b: &SimBall| b.truth.hit.as_ref().map(|h| h.t - lead))));
+        }
+        (out, learned)
+    };
+    let (on, learned) = rows(EstimatorConfig { learn: LearnConfig::default(), ..base });
+    let (off, _) = rows(EstimatorConfig { learn: LearnConfig::OFF, ..base });
+    let truth = match setup.world.and_then(|n| world_named(cal, n)) {
+        Some(w) => SessionLearned {
+            drag_scale: w.physics.drag_coefficient / cal.physics.drag_coefficient
+                * 0.5
+                * (w.ball_drag.0 + w.ball_drag.1),
+            restitution: w.physics.restitution,
+            friction: w.physics.friction,
+            bounces: 0,
+        },
+        None => SessionLearned {
+            drag_scale: 1.0,
+            restitution: cal.physics.restitution,
+            friction: cal.physics.friction,
+            bounces: 0,
+        },
+    };
+    WorldSession {
+        world: setup.world.unwrap_or("ours"),
+        balls: balls.len(),
+        reachable: reachable.iter().filter(|r| **r).count(),
+        learned,
+        truth,
+        on,
+        off,
+    }
 }

@@ -1,0 +1,158 @@
+//! The streaming estimator learns the world across a session (issue 15
+//! item 5), on the virtual clock: simulated balls of a world unlike the
+//! calibration, back to back and observed through the bounce, fed to the
+//! estimator one observation at a time. Exact where the claim is exact
+//! (learning off changes nothing, a reset starts from the calibration, a
+//! bad ball's bound), within stated tolerances where it is statistical.
+
+use topspin_core::calib::Calibration;
+use topspin_core::estimator::session::LearnConfig;
+use topspin_core::estimator::{Estimator, EstimatorConfig};
+use topspin_core::plan::StrikePlan;
+use topspin_core::time::Instant;
+use topspin_sim::worlds::{World, simulate_world_ball, world_named};
+use topspin_sim::{SimBall, TrackerModel, schedule};
+
+const NOISE: f64 = 0.002;
+
+fn tracker() -> TrackerModel {
+    TrackerModel { noise_sigma: NOISE, ..TrackerModel::default() }
+}
+
+/// `n` balls of `world` (seed 1) and their launch times, one second apart.
+fn session(world: &World, cal: &Calibration, n: usize) -> (Vec<SimBall>, Vec<f64>) {
+    let balls: Vec<SimBall> = (0..n).filter_map(|k| simulate_world_ball(world, cal, 1, k, &tracker())).collect();
+    let ends: Vec<f64> = balls.iter().map(|b| b.observations.last().map_or(0.0, |o| o.t)).collect();
+    let launches = schedule(&ends, 1.0).into_iter().map(|t| t + 1.0).collect();
+    (balls, launches)
+}
+
+fn config(learn: LearnConfig) -> EstimatorConfig {
+    EstimatorConfig { learn, ..EstimatorConfig::default().with_noise(NOISE) }
+}
+
+/// Feeds `balls` (launched at `launches`) to `est`; each ball's plans.
+fn feed(est: &mut Estimator, balls: &[SimBall], launches: &[f64]) -> Vec<Vec<StrikePlan>> {
+    balls
+        .iter()
+        .zip(launches)
+        .map(|(b, &t0)| {
+            b.observations.iter().filter_map(|o| est.observe(Instant::from_secs_f64(t0 + o.t), o.pos).plan).collect()
+        })
+        .collect()
+}
+
+/// What a plan says about the ball (not its sequence number or track id).
+fn what(p: &StrikePlan) -> (Instant, Instant, [f64; 3], [f64; 3]) {
+    (p.made_at, p.hit_time, p.position.into(), p.spin.into())
+}
+
+#[test]
+fn the_table_and_the_air_converge_to_the_worlds() {
+    let cal = Calibration::default_cell();
+    for (name, tol_e, tol_mu, tol_drag) in [("other-table", 0.015, 0.03, 0.08), ("heavy-air", 0.015, 0.03, 0.1)] {
+        let world = world_named(&cal, name).unwrap();
+        let (balls, launches) = session(&world, &cal, 60);
+        let mut est = Estimator::new(&cal, config(LearnConfig::default()));
+        feed(&mut est, &balls, &launches);
+        let s = est.session();
+        // The world's drag: its C_D over the calibration's, times its balls' mean.
+        let drag = world.physics.drag_coefficient / cal.physics.drag_coefficient
+            * 0.5
+            * (world.ball_drag.0 + world.ball_drag.1);
+        assert!(s.restitution.count >= 40, "{name}: {} bounces of {}", s.restitution.count, balls.len());
+        assert!((s.restitution.value - world.physics.restitution).abs() < tol_e, "{name}: {s:?}");
+        assert!((s.friction.value - world.physics.friction).abs() < tol_mu, "{name}: {s:?}");
+        assert!((s.drag.value - drag).abs() < tol_drag, "{name}: {s:?} (drag {drag})");
+        // And it started from the calibration's table, which is further off.
+        assert!((cal.physics.restitution - world.physics.restitution).abs() > tol_e, "{name}");
+    }
+}
+
+#[test]
+fn a_bad_ball_moves_what_was_learned_at_most_one_clipped_step() {
+    let cal = Calibration::default_cell();
+    let world = world_named(&cal, "other-table").unwrap();
+    let (mut balls, mut launches) = session(&world, &cal, 30);
+    let cfg = LearnConfig::default();
+    let mut est = Estimator::new(&cal, config(cfg));
+    feed(&mut est, &balls, &launches);
+    let before = *est.session();
+    assert!(before.restitution.count >= cfg.memory, "{before:?}");
+    // One ball from a dead table in thick air (e 0.6, μ 0.6, drag ×1.8).
+    let bad_world = World {
+        physics: topspin_core::physics::PhysicsParams {
+            restitution: 0.6,
+            friction: 0.6,
+            drag_coefficient: 1.8 * cal.physics.drag_coefficient,
+            ..world.physics.clone()
+        },
+        ball_drag: (1.0, 1.0),
+        ..world.clone()
+    };
+    let bad = (0..9).find_map(|k| simulate_world_ball(&bad_world, &cal, 7, k, &tracker())).unwrap();
+    let t0 = launches.last().unwrap() + 3.0;
+    balls.clear();
+    launches.clear();
+    balls.push(bad);
+    launches.push(t0);
+    feed(&mut est, &balls, &launches);
+    // Silence ends its track (and takes its bounce).
+    let mut out = Default::default();
+    est.poll(Instant::from_secs_f64(t0 + 5.0), &mut out);
+    let after = *est.session();
+    assert!(after.restitution.count > before.restitution.count, "the bad ball's bounce was taken: {after:?}");
+    // A running mean over `memory` balls with clipped steps: e by ≤ 0.08,
+    // μ by ≤ 0.1, drag by ≤ 0.3, each weighted 1/(memory + 1).
+    let w = 1.0 / f64::from(cfg.memory + 1);
+    assert!((after.restitution.value - before.restitution.value).abs() <= 0.08 * w + 1e-12, "{before:?} {after:?}");
+    assert!((after.friction.value - before.friction.value).abs() <= 0.1 * w + 1e-12, "{before:?} {after:?}");
+    assert!((after.drag.value - before.drag.value).abs() <= 0.3 * w + 1e-12, "{before:?} {after:?}");
+    // It did pull the way the bad ball went.
+    assert!(after.restitution.value < before.restitution.value, "{before:?} {after:?}");
+}
+
+#[test]
+fn a_new_estimator_starts_from_the_calibration_and_learning_off_learns_nothing() {
+    let cal = Calibration::default_cell();
+    let world = world_named(&cal, "heavy-air").unwrap();
+    let (balls, launches) = session(&world, &cal, 12);
+    let fresh = *Estimator::new(&cal, config(LearnConfig::default())).session();
+    assert_eq!(fresh.restitution.value, cal.physics.restitution);
+    assert_eq!(fresh.friction.value, cal.physics.friction);
+    assert_eq!(fresh.drag.value, 1.0);
+    assert_eq!(fresh.restitution.count, 0);
+    let mut on = Estimator::new(&cal, config(LearnConfig::default()));
+    feed(&mut on, &balls, &launches);
+    assert_ne!(*on.session(), fresh);
+    // A restart (a new configuration) forgets the session.
+    assert_eq!(*Estimator::new(&cal, config(LearnConfig::default())).session(), fresh);
+    let mut off = Estimator::new(&cal, config(LearnConfig::OFF));
+    feed(&mut off, &balls, &launches);
+    assert_eq!(*off.session(), fresh);
+}
+
+#[test]
+fn learning_off_scores_each_ball_as_if_it_were_alone() {
+    let cal = Calibration::default_cell();
+    let world = world_named(&cal, "other-table").unwrap();
+    let (balls, launches) = session(&world, &cal, 12);
+    let alone = |learn: LearnConfig| -> Vec<Vec<StrikePlan>> {
+        balls
+            .iter()
+            .zip(&launches)
+            .flat_map(|(b, &t0)| feed(&mut Estimator::new(&cal, config(learn)), std::slice::from_ref(b), &[t0]))
+            .collect()
+    };
+    let same = |a: &[Vec<StrikePlan>], b: &[Vec<StrikePlan>]| {
+        a.len() == b.len() && a.iter().zip(b).all(|(x, y)| x.iter().map(what).eq(y.iter().map(what)))
+    };
+    // Off: bit-identical plans, ball by ball, in a session or alone.
+    let off = feed(&mut Estimator::new(&cal, config(LearnConfig::OFF)), &balls, &launches);
+    assert!(off.iter().filter(|p| !p.is_empty()).count() >= 8);
+    assert!(same(&off, &alone(LearnConfig::OFF)));
+    // On: the later balls fly with what the earlier ones taught.
+    let on = feed(&mut Estimator::new(&cal, config(LearnConfig::default())), &balls, &launches);
+    assert!(!same(&on, &alone(LearnConfig::default())));
+    assert!(!same(&on, &off));
+}
