@@ -609,7 +609,23 @@ impl StrokeGenerator {
         }
         self.input.minimum_duration = min_duration;
         self.calculations += 1;
-        let ok = matches!(self.otg.calculate(&self.input, &mut self.traj), Ok(RuckigResult::Working));
+        // What Ruckig would refuse is refused here: its refusal formats a
+        // message (an allocation on the RSI thread). A target speed over
+        // the limit by rounding is brought onto it.
+        let mut valid = true;
+        for i in 0..AXES {
+            let (pf, vf, v_max) =
+                (self.input.target_position[i], self.input.target_velocity[i], self.input.max_velocity[i]);
+            if !(pf.is_finite() && vf.is_finite() && self.input.current_position[i].is_finite()) {
+                valid = false;
+            } else if vf.abs() > v_max {
+                if vf.abs() > v_max * (1.0 + 1e-6) {
+                    valid = false;
+                }
+                self.input.target_velocity[i] = vf.clamp(-v_max, v_max);
+            }
+        }
+        let ok = valid && matches!(self.otg.calculate(&self.input, &mut self.traj), Ok(RuckigResult::Working));
         if ok {
             self.t0 = self.t_last;
         } else {
