@@ -647,11 +647,18 @@ impl RsiSession {
             self.push(SessionEvent::PhaseChanged(phase));
         }
         // The lag's feed-forward, in joint space where the drives lag (the
-        // generator's joints; the Cartesian pose where the safety filter
-        // changed the setpoint).
+        // generator's joints). Where the safety filter changed the setpoint
+        // the generator took the filtered pose's joints: still joint space
+        // while those are the filtered pose (a switch to Cartesian and back
+        // is a step the gain rings into the axes); the Cartesian pose only
+        // where they are not (no joints for it).
         let gain = self.cfg.servo.feed_forward_gain(self.cfg.limits.dt);
         let q = self.generator.joints();
-        let sent: Pose6 = if gain > 0.0 && !changed && self.last_joints_valid {
+        let consistent = !changed || {
+            let p = self.cfg.limits.arm.tcp(&q).to_pose6();
+            (0..3).all(|i| (p[i] - cmd[i]).abs() < 1e-6)
+        };
+        let sent: Pose6 = if gain > 0.0 && consistent && self.last_joints_valid {
             let lead = Joints(core::array::from_fn(|i| q.0[i] + gain * (q.0[i] - self.last_joints.0[i])));
             let p = self.cfg.limits.arm.tcp(&lead).to_pose6();
             core::array::from_fn(|i| if i < 3 { p[i] } else { unwrap_near(p[i], cmd[i]) })
@@ -659,7 +666,7 @@ impl RsiSession {
             core::array::from_fn(|i| cmd[i] + gain * (cmd[i] - self.last_command[i]))
         };
         self.last_joints = q;
-        self.last_joints_valid = !changed;
+        self.last_joints_valid = consistent;
         match self.cfg.correction {
             Correction::Cartesian => self.cartesian_correction(&sent, &cmd),
             Correction::Axis => self.axis_correction(&sent, &cmd, ipoc),
