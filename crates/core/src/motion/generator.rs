@@ -630,15 +630,30 @@ impl StrokeGenerator {
             self.t0 = self.t_last;
         } else {
             self.failures += 1;
-            // Hold still where we are: a trajectory of zero length.
+            // Brake within the limits and come back to where we are; only
+            // where even that cannot be planned, hold still (a trajectory
+            // of zero length: from speed, a step the axes cannot follow).
             for i in 0..AXES {
+                self.input.current_position[i] = self.q[i];
+                self.input.current_velocity[i] = self.qd[i];
+                self.input.current_acceleration[i] = self.qdd[i];
                 self.input.target_position[i] = self.q[i];
                 self.input.target_velocity[i] = 0.0;
-                self.input.current_velocity[i] = 0.0;
-                self.input.current_acceleration[i] = 0.0;
+                self.input.target_acceleration[i] = 0.0;
+                self.input.enabled[i] = true;
             }
             self.input.minimum_duration = None;
-            let _ = self.otg.calculate(&self.input, &mut self.traj);
+            let moving = (0..AXES).any(|i| self.qd[i] != 0.0 || self.qdd[i] != 0.0);
+            let braking = moving
+                && (0..AXES).all(|i| self.q[i].is_finite() && self.qd[i].is_finite() && self.qdd[i].is_finite())
+                && matches!(self.otg.calculate(&self.input, &mut self.traj), Ok(RuckigResult::Working));
+            if !braking {
+                for i in 0..AXES {
+                    self.input.current_velocity[i] = 0.0;
+                    self.input.current_acceleration[i] = 0.0;
+                }
+                let _ = self.otg.calculate(&self.input, &mut self.traj);
+            }
             self.t0 = self.t_last;
         }
         ok
