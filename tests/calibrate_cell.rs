@@ -177,19 +177,25 @@ fn touches() -> Vec<TouchRow> {
     POINTS.iter().map(|(n, own)| (n.to_string(), tcp_in_b_mm(table_point(n, *own)), *own)).collect()
 }
 
+/// `topspin calibrate cell --points` on `touches` written as a CSV in
+/// `dir`, writing into the calibration copied there (`--json`).
+fn calibrate_from_points(dir: &Path, touches: &[TouchRow]) -> std::process::Output {
+    let csv = dir.join("touches.csv");
+    std::fs::write(&csv, csv_text(touches)).unwrap();
+    topspin()
+        .args(["calibrate", "cell", "--points"])
+        .arg(&csv)
+        .args(["--contact-offset-mm", "6", "--json", "--write"])
+        .arg(dir)
+        .output()
+        .unwrap()
+}
+
 #[test]
 fn a_points_file_gives_the_cell_lines_and_writes_them() {
     let dir = tempfile::tempdir().unwrap();
     copy_calib(dir.path());
-    let csv = dir.path().join("touches.csv");
-    std::fs::write(&csv, csv_text(&touches())).unwrap();
-    let out = topspin()
-        .args(["calibrate", "cell", "--points"])
-        .arg(&csv)
-        .args(["--contact-offset-mm", "6", "--json", "--write"])
-        .arg(dir.path())
-        .output()
-        .unwrap();
+    let out = calibrate_from_points(dir.path(), &touches());
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let j: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(j["ok"], true);
@@ -229,16 +235,8 @@ fn a_wrong_touch_is_refused_with_exit_1_and_nothing_written() {
     copy_calib(dir.path());
     let mut t = touches();
     t[1].1[2] += 15.0; // 15 mm high
-    let csv = dir.path().join("touches.csv");
-    std::fs::write(&csv, csv_text(&t)).unwrap();
     let before = std::fs::read_to_string(dir.path().join("robot.toml")).unwrap();
-    let out = topspin()
-        .args(["calibrate", "cell", "--points"])
-        .arg(&csv)
-        .args(["--contact-offset-mm", "6", "--json", "--write"])
-        .arg(dir.path())
-        .output()
-        .unwrap();
+    let out = calibrate_from_points(dir.path(), &t);
     assert_eq!(out.status.code(), Some(1));
     let j: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(j["ok"], false);
@@ -250,7 +248,7 @@ fn a_wrong_touch_is_refused_with_exit_1_and_nothing_written() {
     // A looser bound accepts it.
     let out = topspin()
         .args(["calibrate", "cell", "--points"])
-        .arg(&csv)
+        .arg(dir.path().join("touches.csv"))
         .args(["--contact-offset-mm", "6", "--max-rms-mm", "20", "--max-worst-mm", "20", "--max-tilt-deg", "5"])
         .output()
         .unwrap();

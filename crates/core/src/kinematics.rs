@@ -378,24 +378,15 @@ impl ArmGeometry {
         self.shoulder_offset + self.upper_arm + self.forearm.hypot(self.elbow_offset)
     }
 
-    /// Forward kinematics of `q` (the hot paths' share of
-    /// [`frames`](Self::frames), computed the same way: bit for bit its
-    /// wrist, flange and TCP, tested).
+    /// Forward kinematics of `q`: the wrist, flange and TCP of
+    /// [`frames`](Self::frames).
     pub fn forward(&self, q: &Joints) -> ArmPose {
-        let q = &q.0;
-        let r1 = rz(-q[0]);
-        let p2 = Vec3::new(0.0, 0.0, self.shoulder_height) + r1 * Vec3::new(self.shoulder_offset, 0.0, 0.0);
-        let r2 = r1 * ry(q[1]);
-        let p3 = p2 + r2 * Vec3::new(self.upper_arm, 0.0, 0.0);
-        let r3 = r2 * ry(q[2]);
-        let p4 = p3 + r3 * Vec3::new(0.0, 0.0, self.elbow_offset);
-        let r4 = r3 * rx(-q[3]);
-        let wrist = p4 + r4 * Vec3::new(self.forearm, 0.0, 0.0);
-        let r5 = r4 * ry(q[4]);
-        let p6 = wrist + r5 * Vec3::new(self.flange, 0.0, 0.0);
-        let r6 = r5 * rx(-q[5]);
-        let flange = Pose { position: p6, rotation: r6 * ry90() };
-        ArmPose { wrist, flange, tcp: flange.compose(&self.tool) }
+        let f = self.frames(q);
+        ArmPose {
+            wrist: f[5].position,
+            flange: Pose { position: f[6].position, rotation: f[6].rotation * ry90() },
+            tcp: f[7],
+        }
     }
 
     /// Every link frame of `q` in B, foot to bat ([`FRAMES`] of them):

@@ -122,6 +122,11 @@ pub struct ReturnJudgement {
 }
 
 impl ReturnJudgement {
+    /// No contact, and why.
+    fn no_contact(why: String) -> Self {
+        ReturnJudgement { fail: Some(ReturnFail::NoContact), contact: None, landing: None, after: None, why: Some(why) }
+    }
+
     /// True when the ball went back over the net onto the opponent's half.
     pub fn returned(&self) -> bool {
         self.fail.is_none()
@@ -376,24 +381,11 @@ pub fn judge_return(cal: &Calibration, launch: &Launch, start: Instant, t_hit: f
                     STROKE_WINDOW.0 / 1_000_000
                 ),
             };
-            return ReturnJudgement {
-                fail: Some(ReturnFail::NoContact),
-                contact: None,
-                landing: None,
-                after: None,
-                why: Some(why),
-            };
+            return ReturnJudgement::no_contact(why);
         }
     };
     let Some(impact) = racket.hit_bat(&touch.ball, &touch.bat) else {
-        let why = "speed: the bat was running away from the ball".to_owned();
-        return ReturnJudgement {
-            fail: Some(ReturnFail::NoContact),
-            contact: None,
-            landing: None,
-            after: None,
-            why: Some(why),
-        };
+        return ReturnJudgement::no_contact("speed: the bat was running away from the ball".to_owned());
     };
     let after = impact.after;
     let (fail, landing) = fly_return(&prop, &after, touch.t);

@@ -76,22 +76,7 @@ fn ten_thousand_cycles_of_strikes() {
     let lim = MotionLimits::from_robot(&cal.robot);
     let mut p = pair(4, 4, Faults::default(), 100);
     let n = 10_000u64;
-    let end = T0 + Duration::from_millis(n * 4);
-
-    // The strike stream (`topspin_sim::strikes`), published on the virtual clock.
-    let mut finals: Vec<StrikePlan> = Vec::new();
-    for r in strike_stream(4, T0, end) {
-        while p.now() < r.plan.made_at {
-            p.step().expect("RSI running");
-        }
-        p.publish(r.plan);
-        if r.committed {
-            finals.push(r.plan);
-        }
-    }
-    while p.now() < end {
-        p.step().expect("RSI running");
-    }
+    let finals = strikes(&mut p, n);
     let r = p.result();
     let st = *p.session.stats();
 
@@ -243,7 +228,8 @@ fn axis_pair(session_correction: Correction) -> Pair {
     Pair::new(RsiSession::new(cfg).unwrap(), c, Faults::default(), 11, T0)
 }
 
-/// Runs the strike stream for `n` cycles; the committed plans.
+/// Runs the strike stream (`topspin_sim::strikes`), published on the
+/// virtual clock, for `n` cycles; the committed plans.
 fn strikes(p: &mut Pair, n: u64) -> Vec<StrikePlan> {
     let end = T0 + Duration::from_millis(n * 4);
     let mut finals = Vec::new();
