@@ -5,7 +5,7 @@
 //! observation on its own and prints p50 / p99 / p99.9 / max, with the
 //! default stroke (`strike.aim = landing`: the return aimed through the
 //! racket contact model) and with the paper's rule (`paper`) for the
-//! aim's share.
+//! aim's share, and without the pre-bounce batch (`smooth`) for its.
 
 use std::hint::black_box;
 use topspin_daemon::clock;
@@ -39,10 +39,10 @@ enum Step {
     Other,
 }
 
-fn percentiles(obs: &[(Instant, Vec3)], cal: &Calibration, label: &str) {
+fn percentiles(obs: &[(Instant, Vec3)], cal: &Calibration, cfg: EstimatorConfig, label: &str) {
     let mut timed: Vec<(f64, Step)> = Vec::with_capacity(obs.len() * 5);
     for _ in 0..5 {
-        let mut est = Estimator::new(cal, EstimatorConfig::default());
+        let mut est = Estimator::new(cal, cfg);
         for &(t, p) in obs {
             let start = clock::now();
             let out = black_box(est.observe(t, p));
@@ -82,10 +82,12 @@ fn percentiles(obs: &[(Instant, Vec3)], cal: &Calibration, label: &str) {
 fn benches(c: &mut Criterion) {
     let obs = observations();
     let cal = Calibration::default_cell();
-    percentiles(&obs, &cal, "[aim landing]");
+    let cfg = EstimatorConfig::default();
+    percentiles(&obs, &cal, cfg, "[aim landing]");
     let mut paper = cal.clone();
     paper.strike.aim = topspin_core::calib::AimMode::Paper;
-    percentiles(&obs, &paper, "[aim paper]");
+    percentiles(&obs, &paper, cfg, "[aim paper]");
+    percentiles(&obs, &cal, EstimatorConfig { smooth: false, ..cfg }, "[aim landing, no batch]");
     c.bench_function("estimator/observe_stream_of_45_balls", |b| {
         b.iter(|| {
             let mut est = Estimator::new(&cal, EstimatorConfig::default());

@@ -104,8 +104,8 @@ impl Ekf {
         state_of(&self.x)
     }
 
-    /// Continuous-time Jacobian F of the flight at `s`.
-    fn jacobian(prop: &Propagator, s: &BallState) -> M9 {
+    /// The flight's acceleration derivatives at `s`: ∂a/∂v and ∂a/∂ω.
+    pub(crate) fn accel_jacobians(prop: &Propagator, s: &BallState) -> (Matrix3<f64>, Matrix3<f64>) {
         let f = &prop.flight;
         let v = s.vel;
         let speed = v.norm().max(1e-9);
@@ -117,6 +117,12 @@ impl Ekf {
             + s.spin.cross_matrix() * k_m
             + magnus * dk_dv.transpose();
         let dadw = -v.cross_matrix() * k_m + magnus * dk_dw.transpose();
+        (dadv, dadw)
+    }
+
+    /// Continuous-time Jacobian F of the flight at `s`.
+    fn jacobian(prop: &Propagator, s: &BallState) -> M9 {
+        let (dadv, dadw) = Self::accel_jacobians(prop, s);
         let mut jac = M9::zeros();
         jac.fixed_view_mut::<3, 3>(0, 3).copy_from(&Matrix3::identity());
         jac.fixed_view_mut::<3, 3>(3, 3).copy_from(&dadv);

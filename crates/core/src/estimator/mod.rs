@@ -17,6 +17,7 @@
 pub mod aim;
 pub mod ekf;
 pub mod session;
+mod smooth;
 pub mod stroke;
 
 use heapless::Vec as HVec;
@@ -81,6 +82,9 @@ pub struct EstimatorConfig {
     pub spin_prior_along_velocity: f64,
     /// What the estimator learns across the session (drag, table).
     pub learn: LearnConfig,
+    /// Re-read the pre-bounce flight in batches, with its drag, as it
+    /// grows ([`smooth`]): the filter alone reads fast spin low.
+    pub smooth: bool,
 }
 
 impl Default for EstimatorConfig {
@@ -94,6 +98,7 @@ impl Default for EstimatorConfig {
             initial_spin_std: 600.0,
             spin_prior_along_velocity: crate::fit::refine::RefineConfig::default().prior_along_velocity,
             learn: LearnConfig::default(),
+            smooth: true,
         }
     }
 }
@@ -240,6 +245,12 @@ struct Track {
     /// The last aim of the return (`strike.aim = "landing"`): the next
     /// refinement starts from it.
     aim: Option<aim::Aim>,
+    /// The batch reading the window now, if any, and the window's length
+    /// when the last one began.
+    batch: Option<smooth::Batch>,
+    batch_from: usize,
+    /// A batch has read this flight: its drag replaces the cubic's.
+    smoothed: bool,
 }
 
 /// The estimator: at most one ball tracked at a time (the one coming at
@@ -261,6 +272,9 @@ pub struct Estimator {
     plan_seq: u32,
     last_prediction: Option<Prediction>,
     session: Session,
+    /// σ of ln(drag multiplier) of one flight about the session's
+    /// (`physics.flight_variation.drag`): the batch's prior.
+    drag_variation: f64,
 }
 
 /// The arm's reach over the calibration's hitting window, for the faces
@@ -295,6 +309,7 @@ impl Estimator {
             plan_seq: 0,
             last_prediction: None,
             session: Session::new(&cal.physics.bounce_model()),
+            drag_variation: cal.physics.variation.drag,
         }
     }
 
@@ -453,6 +468,9 @@ impl Estimator {
             bounce_t: None,
             after: HVec::new(),
             aim: None,
+            batch: None,
+            batch_from: 0,
+            smoothed: false,
         });
         out.push(EstimatorEvent::Started { trajectory: id, t: last.t, start_outliers: outliers.len() as u8 });
         self.plan(last.t, out);
@@ -470,7 +488,6 @@ impl Estimator {
             if let Update::Accepted { .. } = trial.update(&sample.pos) {
                 out.push(EstimatorEvent::Bounce { trajectory: track.id, t: tb });
                 if track.spin_before_bounce.is_none() {
-                    track.spin_before_bounce = Some(track.ekf.state().spin);
                     track.bounce_t = Some(tb);
                     if cfg.learn.enabled
                         && let Some(drag) =
@@ -484,6 +501,10 @@ impl Estimator {
                             FlightScales { drag: cfg.learn.ball_drag(&self.session.drag, Some(drag)), lift: 1.0 };
                         track.prop.flight = self.prop.flight.scaled(scales);
                     }
+                    // A batch of the window still running ends with it (its
+                    // result is for the flight before the bounce).
+                    track.batch = None;
+                    track.spin_before_bounce = Some(track.ekf.state().spin);
                 }
             }
             trial = track.ekf;
@@ -497,16 +518,24 @@ impl Estimator {
                 if track.spin_before_bounce.is_none() {
                     let _ = track.window.push(sample);
                     let n = track.window.len();
-                    if cfg.learn.enabled
+                    let ball_drag_now = cfg.learn.enabled
                         && cfg.learn.ball_drag_weight > 0.0
                         && n >= cfg.learn.min_samples
                         && n.is_multiple_of(cfg.learn.ball_drag_every.max(1))
                         && !track.window.is_full()
-                    {
-                        // This ball's own drag so far (one cubic over the window).
-                        let own = session::drag_from_flight(&track.window, &self.prop.flight, cfg.learn.min_samples);
-                        let scales = FlightScales { drag: cfg.learn.ball_drag(&self.session.drag, own), lift: 1.0 };
-                        track.prop.flight = self.prop.flight.scaled(scales);
+                        && !track.smoothed;
+                    if ball_drag_now {
+                        track.prop.flight = ball_flight(&self.prop, &self.session, &cfg, &track.window);
+                    }
+                    if cfg.smooth {
+                        if track.batch.is_none()
+                            && n >= smooth::FIRST
+                            && n >= track.batch_from + smooth::EVERY
+                            && !track.window.is_full()
+                        {
+                            start_batch(track, &self.prop, &self.session, &cfg, self.drag_variation);
+                        }
+                        advance_batch(track, smooth::SAMPLES_PER_STEP);
                     }
                     if cfg.spin_source == SpinSource::WindowFit {
                         let prop = track.prop;
@@ -617,6 +646,55 @@ impl Estimator {
             spin,
             confidence,
         });
+    }
+}
+
+/// The flight a ball flies with before its batch has read it: the
+/// calibration's, with the session's drag weighed against the ball's own
+/// (one cubic over its window) where learning is on.
+fn ball_flight(
+    prop: &Propagator,
+    session: &Session,
+    cfg: &EstimatorConfig,
+    window: &[Sample],
+) -> crate::physics::FlightModel {
+    if !cfg.learn.enabled {
+        return prop.flight;
+    }
+    let own = session::drag_from_flight(window, &prop.flight, cfg.learn.min_samples);
+    prop.flight.scaled(FlightScales { drag: cfg.learn.ball_drag(&session.drag, own), lift: 1.0 })
+}
+
+/// Starts a batch over the track's window (pre-bounce) from the filter's
+/// state, against the session's air weighed with this ball's own cubic
+/// reading (the drag's prior).
+fn start_batch(track: &mut Track, prop: &Propagator, session: &Session, cfg: &EstimatorConfig, drag_std: f64) {
+    let flight = ball_flight(prop, session, cfg, &track.window);
+    let priors = smooth::Priors { sigma: cfg.noise.measurement, along_std: cfg.spin_prior_along_velocity, drag_std };
+    let prop = Propagator { flight, ..track.prop };
+    track.batch = smooth::Batch::start(&prop, &track.window, &track.ekf.state(), &priors);
+    track.batch_from = track.window.len();
+}
+
+/// Advances the track's batch ([`smooth::Batch`]) by a bounded share, and
+/// when it is done hands what it found to the filter: the spin it read
+/// (constant in flight), and the drag for the rest of the flight. The
+/// filter keeps its position and velocity, which its latest samples set:
+/// the batch's, flown on from its window's end, would be millimetres off
+/// them, and the gate would take the next samples for another ball.
+fn advance_batch(track: &mut Track, samples: usize) {
+    let Some(batch) = &mut track.batch else { return };
+    let smooth::Progress::Done(found) = batch.advance(&track.window, samples) else { return };
+    let batch = *batch;
+    track.batch = None;
+    let Some(found) = found else { return };
+    if found.state.spin.iter().all(|v| v.is_finite()) {
+        for k in 0..3 {
+            track.ekf.x[6 + k] = found.state.spin[k];
+        }
+        let flight = batch.prop.flight.scaled(FlightScales { drag: found.drag, lift: 1.0 });
+        track.prop.flight = flight;
+        track.smoothed = true;
     }
 }
 
