@@ -51,25 +51,18 @@ fn thirty_balls_are_hit_on_virtual_time() {
     // the bat's actual pose and velocity; robots in the literature return
     // 80–97 % of launcher balls.
     let returned = r.per_ball.iter().filter(|b| b.reachable && b.returned).count();
-    assert!(returned as f64 >= 0.80 * r.reachable() as f64, "{}", summary(&r));
+    assert!(returned as f64 >= 0.85 * r.reachable() as f64, "{}", summary(&r));
     assert_eq!(r.mock.late, 0);
     assert_eq!((r.session.requests, r.session.answers), (r.mock.cycles, r.mock.cycles));
     // Plans the axes cannot make are refused (and the ball skipped where
-    // none can be made); what is taken keeps every axis within its limits.
-    // Not zero since the aimed return met the session learning (seed 7):
-    // where the safety filter changes the setpoint (2 cycles here) the
-    // filtered pose is a step the axes take through their lag, and A2's
-    // actual acceleration passes its limit once (1 cycle of 11 312).
-    // Counted, not stopped (`stop_on_axis_rates` is off). Before the
-    // feed-forward stayed in joint space through a clamp it rang for 4
-    // cycles at 2.5× the limit. At most one per clamped cycle.
-    assert!(
-        r.mock.rates_over <= r.session.safety_clamped,
-        "{} rates over {} after {} clamped cycles",
-        summary(&r),
-        r.mock.rates_over,
-        r.session.safety_clamped
-    );
+    // none can be made); what is taken keeps every axis within its limits,
+    // and no stroke meets the safety filter: a face at the edge of the
+    // workspace's orientation range once had the filter brake the wrist,
+    // a step the axes took through their lag (A2 at 2.5× its acceleration
+    // limit; seed 2 on the wall clock, A4 at 5.9×). Strokes now keep 10°
+    // inside that range (`ORIENTATION_MARGIN_RAD`).
+    assert_eq!(r.session.safety_clamped, 0, "{}", summary(&r));
+    assert_eq!(r.mock.rates_over, 0, "{}", summary(&r));
     assert_eq!(r.ingest.accepted as usize, r.balls.iter().map(|b| b.observations.len()).sum::<usize>());
     home_within_limits(&r);
     // One plan per trajectory, each within the 4 ms the judge allows.
@@ -107,4 +100,54 @@ fn every_tracker_fault_at_once_is_survived_and_counted_exactly() {
     assert!(i.duplicate > 0 && i.out_of_order > 0 && i.clock_jumps > 0, "{i:?}");
     // The data still allows hits.
     assert!(r.reachable() > 0 && r.hits() > 0, "{}", summary(&r));
+}
+
+/// The measurement behind the README's virtual-cell numbers (not a check):
+/// `SEEDS=1,2,3,4,5,7 BALLS=27 cargo test --release --test virtual_cell --
+/// --ignored --nocapture` prints every ball not returned (or missed) with
+/// the judge's reason and the totals over the seeds.
+#[test]
+#[ignore = "a measurement: run it by name"]
+fn returns_over_seeds() {
+    let cal = Calibration::default_cell();
+    let seeds: Vec<u64> = std::env::var("SEEDS")
+        .unwrap_or_else(|_| "1,2,3,4,5,7".into())
+        .split(',')
+        .map(|s| s.trim().parse().expect("SEEDS: comma-separated integers"))
+        .collect();
+    let balls = std::env::var("BALLS").map_or(27, |s| s.parse().expect("BALLS: an integer"));
+    let (mut reach, mut hit, mut returned, mut rates_over, mut clamped) = (0, 0, 0, 0, 0);
+    let mut miss = Vec::new();
+    for &seed in &seeds {
+        let r = run_virtual(&DemoConfig { balls, seed, ..DemoConfig::default() }, &cal);
+        rates_over += r.mock.rates_over;
+        clamped += r.session.safety_clamped;
+        for b in r.per_ball.iter().filter(|b| b.reachable) {
+            reach += 1;
+            hit += b.hit as usize;
+            returned += b.returned as usize;
+            miss.extend(b.hit_err_mm);
+            if !(b.hit && b.returned) {
+                eprintln!(
+                    "seed {seed} ball {:2} {:15} spin {:?} rps, read {:?}; miss {:.1} mm; {} {}",
+                    b.ball,
+                    b.setting,
+                    b.true_spin_rps.map(|v| v.round()),
+                    b.estimated_spin_rps.map(|w| w.map(|v| v.round())),
+                    b.hit_err_mm.unwrap_or(f64::NAN),
+                    b.return_fail.map_or("returned", |f| f.name()),
+                    b.return_why.as_deref().unwrap_or("")
+                );
+            }
+        }
+        eprintln!("{}", summary(&r));
+    }
+    miss.sort_by(f64::total_cmp);
+    eprintln!(
+        "seeds {seeds:?} × {balls} balls: {hit} of {reach} reachable hit ({:.1} %), {returned} returned ({:.1} %), \
+         median miss {:.1} mm; {rates_over} axis-rate overs, {clamped} safety-clamped cycles",
+        100.0 * hit as f64 / reach as f64,
+        100.0 * returned as f64 / reach as f64,
+        miss.get(miss.len() / 2).copied().unwrap_or(f64::NAN)
+    );
 }

@@ -113,7 +113,8 @@ fn default_aim_bat_speed() -> [f64; 2] {
     [0.5, 2.0]
 }
 
-/// ±40°: inside the workspace's ±45° about home (`robot.toml`).
+/// ±40°: inside the workspace's ±55° about home less the strokes' 10°
+/// margin (`robot.toml`).
 fn default_aim_tilt() -> [f64; 2] {
     [-40.0, 40.0]
 }

@@ -56,8 +56,10 @@ pub(crate) const DEEPER: f64 = 0.25;
 const RETARGET_NEAR: f64 = 0.2;
 /// Largest change of θ or ψ in one step, rad (10°).
 const MAX_STEP: f64 = 0.1745;
-/// The heading's bound, rad (the workspace allows ±45° about home).
-const MAX_HEADING: f64 = 0.7;
+/// The heading's bound, rad: the workspace allows ±45° about home
+/// (`workspace.abc_range_deg`), strokes keep 10° inside it
+/// ([`crate::motion::generator::ORIENTATION_MARGIN_RAD`]).
+const MAX_HEADING: f64 = 0.61;
 /// ∂x/∂θ above −this (m/rad) is the lob side of the landing's turn.
 const LOB_SLOPE: f64 = 0.5;
 /// Finite-difference step for the first Jacobian, rad (1°).

@@ -87,6 +87,11 @@ pub const MAX_LATE_S: f64 = 0.010;
 /// path between may overshoot its ends a little, and the lag's
 /// feed-forward leads it).
 pub const LIMIT_MARGIN_RAD: f64 = 10.0 * std::f64::consts::PI / 180.0;
+/// A stroke's face keeps this far inside the workspace's orientation
+/// range (`workspace.abc_range_deg`), rad: the joint-space path into and
+/// out of the hitting pose turns the bat on past it, and the safety filter
+/// brakes a stroke that would leave the range (a step the axes feel).
+pub const ORIENTATION_MARGIN_RAD: f64 = 10.0 * std::f64::consts::PI / 180.0;
 /// A stroke's targets keep A3 this far from the stretched elbow, rad.
 pub const ELBOW_MARGIN_RAD: f64 = 10.0 * std::f64::consts::PI / 180.0;
 /// A stroke's joints keep |A5| at least this many times the singular
@@ -337,7 +342,7 @@ impl StrokeGenerator {
         let abc = lim.orientation_t_to_b(o);
         for i in 0..3 {
             let k = 3 + i;
-            let x = abc[i].clamp(lim.lo[k], lim.hi[k]);
+            let x = abc[i].clamp(lim.lo[k] + ORIENTATION_MARGIN_RAD, lim.hi[k] - ORIENTATION_MARGIN_RAD);
             if x != abc[i] {
                 clamped = true;
             }

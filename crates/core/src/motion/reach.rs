@@ -18,7 +18,9 @@
 
 #![allow(clippy::needless_range_loop)] // parallel per-axis arrays
 
-use super::generator::{ELBOW_MARGIN_RAD, JERK_RAMP_S, JOINT_LIMIT_FRACTION, LIMIT_MARGIN_RAD, MAX_OUTSIDE_M};
+use super::generator::{
+    ELBOW_MARGIN_RAD, JERK_RAMP_S, JOINT_LIMIT_FRACTION, LIMIT_MARGIN_RAD, MAX_OUTSIDE_M, ORIENTATION_MARGIN_RAD,
+};
 use super::{MotionLimits, Pose6};
 use crate::kinematics::{AXES, Axis, Joints, LimitKind, LimitViolation, Pose};
 use crate::physics::Vec3;
@@ -270,9 +272,10 @@ impl ReachMap {
 pub fn speed_cap(lim: &MotionLimits, point: Vec3, o: EulerZyx) -> f64 {
     let p = lim.point_t_to_b(point);
     let abc = lim.orientation_t_to_b(o);
-    // The generator clamps the orientation to the workspace's range: a face
-    // outside it is not the face the bat would have.
-    if (0..3).any(|i| abc[i] < lim.lo[3 + i] || abc[i] > lim.hi[3 + i]) {
+    // The generator clamps the orientation to within a margin of the
+    // workspace's range: a face outside it is not the face the bat would have.
+    let m = ORIENTATION_MARGIN_RAD;
+    if (0..3).any(|i| abc[i] < lim.lo[3 + i] + m || abc[i] > lim.hi[3 + i] - m) {
         return 0.0;
     }
     let pose: Pose6 = [p.x, p.y, p.z, abc[0], abc[1], abc[2]];
