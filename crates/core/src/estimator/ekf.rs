@@ -104,25 +104,9 @@ impl Ekf {
         state_of(&self.x)
     }
 
-    /// The flight's acceleration derivatives at `s`: ∂a/∂v and ∂a/∂ω.
-    pub(crate) fn accel_jacobians(prop: &Propagator, s: &BallState) -> (Matrix3<f64>, Matrix3<f64>) {
-        let f = &prop.flight;
-        let v = s.vel;
-        let speed = v.norm().max(1e-9);
-        let (k_m, dk_dv, dk_dw) = f.k_m_with_gradients(&v, &s.spin);
-        // ∂a/∂v = −k_D(‖v‖ I + v vᵀ/‖v‖) + k_M [ω]× + (ω×v) ∂k_M/∂vᵀ;
-        // ∂a/∂ω = −k_M [v]× + (ω×v) ∂k_M/∂ωᵀ (k_M falls with S where the lift saturates).
-        let magnus = s.spin.cross(&v);
-        let dadv = -(Matrix3::identity() * speed + v * v.transpose() / speed) * f.k_d()
-            + s.spin.cross_matrix() * k_m
-            + magnus * dk_dv.transpose();
-        let dadw = -v.cross_matrix() * k_m + magnus * dk_dw.transpose();
-        (dadv, dadw)
-    }
-
     /// Continuous-time Jacobian F of the flight at `s`.
     fn jacobian(prop: &Propagator, s: &BallState) -> M9 {
-        let (dadv, dadw) = Self::accel_jacobians(prop, s);
+        let (dadv, dadw) = prop.flight.accel_jacobians(&s.vel, &s.spin);
         let mut jac = M9::zeros();
         jac.fixed_view_mut::<3, 3>(0, 3).copy_from(&Matrix3::identity());
         jac.fixed_view_mut::<3, 3>(3, 3).copy_from(&dadv);

@@ -33,7 +33,7 @@
 
 use nalgebra::{SMatrix, SVector};
 
-use super::ekf::{COV_STEP, Ekf};
+use super::ekf::COV_STEP;
 use crate::fit::Sample;
 use crate::physics::{BallState, FlightScales, Propagator, Vec3};
 
@@ -142,7 +142,7 @@ impl Pass {
                 let step = dt / steps;
                 for _ in 0..steps as usize {
                     // d/dt Φ_p = Φ_v; d/dt Φ_v = ∂a/∂v Φ_v + [0 0 ∂a/∂ω ∂a/∂ln m].
-                    let (dadv, dadw) = Ekf::accel_jacobians(&self.prop, &self.s);
+                    let (dadv, dadw) = self.prop.flight.accel_jacobians(&self.s.vel, &self.s.spin);
                     let mut dv = dadv * self.phi_v;
                     dv.fixed_view_mut::<3, 3>(0, 6).add_assign(&dadw);
                     dv.column_mut(DRAG).sub_assign(&(self.s.vel * (k_d * self.s.vel.norm())));
@@ -323,7 +323,7 @@ use std::ops::{AddAssign, SubAssign};
 mod tests {
     use super::*;
     use crate::calib::Calibration;
-    use crate::estimator::ekf::EkfNoise;
+    use crate::estimator::ekf::{Ekf, EkfNoise};
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
 

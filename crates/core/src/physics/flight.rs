@@ -8,6 +8,8 @@
 
 use serde::{Deserialize, Serialize};
 
+use nalgebra::Matrix3;
+
 use super::{PhysicsParams, Vec3};
 
 /// How the Magnus coefficient depends on the spin parameter S = r‖ω‖/‖v‖.
@@ -159,6 +161,21 @@ impl FlightModel {
         let d_dw = spin * (dk_ds * self.radius / (w * speed));
         let d_dv = vel * (-dk_ds * s / (speed * speed));
         (k_m, d_dv, d_dw)
+    }
+
+    /// The acceleration's derivatives at `vel`, `spin`: ∂a/∂v and ∂a/∂ω
+    /// (the flight's Jacobian for a filter's or a fit's sensitivities).
+    pub fn accel_jacobians(&self, vel: &Vec3, spin: &Vec3) -> (Matrix3<f64>, Matrix3<f64>) {
+        let speed = vel.norm().max(1e-9);
+        let (k_m, dk_dv, dk_dw) = self.k_m_with_gradients(vel, spin);
+        // ∂a/∂v = −k_D(‖v‖ I + v vᵀ/‖v‖) + k_M [ω]× + (ω×v) ∂k_M/∂vᵀ;
+        // ∂a/∂ω = −k_M [v]× + (ω×v) ∂k_M/∂ωᵀ (k_M falls with S where the lift saturates).
+        let magnus = spin.cross(vel);
+        let dadv = -(Matrix3::identity() * speed + vel * vel.transpose() / speed) * self.k_d
+            + spin.cross_matrix() * k_m
+            + magnus * dk_dv.transpose();
+        let dadw = -vel.cross_matrix() * k_m + magnus * dk_dw.transpose();
+        (dadv, dadw)
     }
 
     /// The lift model C_M(S).
