@@ -309,7 +309,13 @@ pub fn refine(
         let mut current = cost(&theta, &w, &prior);
         for _ in 0..cfg.max_iterations {
             iterations += 1;
-            let (jtj, jtr) = normal_equations(prop, samples, &theta, &w, sigma);
+            let (mut jtj, mut jtr) = normal_equations(prop, samples, &theta, &w, sigma);
+            // Held parameters carry no information (their columns are zero).
+            for k in (0..NP).filter(|&k| !free[k]) {
+                jtj.row_mut(k).fill(0.0);
+                jtj.column_mut(k).fill(0.0);
+                jtr[k] = 0.0;
+            }
             info = jtj;
             let mut normal = jtj + prior;
             let mut grad = jtr + prior * prior_offset(&theta);
