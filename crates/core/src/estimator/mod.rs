@@ -685,15 +685,14 @@ fn start_batch(track: &mut Track, prop: &Propagator, session: &Session, cfg: &Es
 fn advance_batch(track: &mut Track, samples: usize) {
     let Some(batch) = &mut track.batch else { return };
     let smooth::Progress::Done(found) = batch.advance(&track.window, samples) else { return };
-    let batch = *batch;
+    let given = batch.prop.flight;
     track.batch = None;
     let Some(found) = found else { return };
     if found.state.spin.iter().all(|v| v.is_finite()) {
         for k in 0..3 {
             track.ekf.x[6 + k] = found.state.spin[k];
         }
-        let flight = batch.prop.flight.scaled(FlightScales { drag: found.drag, lift: 1.0 });
-        track.prop.flight = flight;
+        track.prop.flight = given.scaled(FlightScales { drag: found.drag, lift: 1.0 });
         track.smoothed = true;
     }
 }

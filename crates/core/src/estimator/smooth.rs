@@ -35,7 +35,7 @@ use nalgebra::{SMatrix, SVector};
 
 use super::ekf::COV_STEP;
 use crate::fit::Sample;
-use crate::physics::{BallState, FlightScales, Propagator, Vec3};
+use crate::physics::{BallState, FlightScales, Propagator, Sensitivities, Vec3};
 
 /// Linearisations at most: the filter's state, then Gauss–Newton steps
 /// (from the filter's state two or three reach the answer; from far off,
@@ -87,8 +87,8 @@ fn state_of(x: &VN) -> BallState {
 }
 
 /// One linearisation at `x`, part way through the window: the flight so
-/// far, the sensitivity of its position and velocity to the unknowns (Φ,
-/// 6×10: the spin is constant in flight), and the normal equations.
+/// far, the sensitivity of its position and velocity to the unknowns
+/// ([`Sensitivities`]), and the normal equations.
 #[derive(Copy, Clone, Debug)]
 struct Pass {
     x: VN,
@@ -98,8 +98,7 @@ struct Pass {
     cursor: usize,
     s: BallState,
     t: f64,
-    phi_p: SMatrix<f64, 3, N>,
-    phi_v: SMatrix<f64, 3, N>,
+    phi: Sensitivities<N>,
     h: MN,
     g: VN,
     /// Σ‖residual‖²/σ² so far.
@@ -118,21 +117,13 @@ struct Finished {
 
 impl Pass {
     fn new(prop: &Propagator, x: VN, t0: f64) -> Self {
-        let mut phi_p = SMatrix::<f64, 3, N>::zeros();
-        let mut phi_v = SMatrix::<f64, 3, N>::zeros();
-        for k in 0..3 {
-            phi_p[(k, k)] = 1.0;
-            phi_v[(k, k + 3)] = 1.0;
-        }
+        let phi = Sensitivities::new(Some(DRAG), None);
         let prop = Propagator { flight: prop.flight.scaled(FlightScales { drag: x[DRAG].exp(), lift: 1.0 }), ..*prop };
-        Pass { x, prop, cursor: 0, s: state_of(&x), t: t0, phi_p, phi_v, h: MN::zeros(), g: VN::zeros(), cost: 0.0 }
+        Pass { x, prop, cursor: 0, s: state_of(&x), t: t0, phi, h: MN::zeros(), g: VN::zeros(), cost: 0.0 }
     }
 
-    /// Reads the window's samples up to `end` (exclusive). Φ follows the
-    /// flight's Jacobian to second order per step; the drag's column is
-    /// driven by the drag itself (∂a/∂ln m = −k_D‖v‖v).
+    /// Reads the window's samples up to `end` (exclusive).
     fn run(&mut self, window: &[Sample], end: usize, w2: f64) {
-        let k_d = self.prop.flight.k_d();
         while self.cursor < end.min(window.len()) {
             let sample = window[self.cursor];
             self.cursor += 1;
@@ -141,20 +132,15 @@ impl Pass {
                 let steps = (dt / COV_STEP).ceil().max(1.0);
                 let step = dt / steps;
                 for _ in 0..steps as usize {
-                    // d/dt Φ_p = Φ_v; d/dt Φ_v = ∂a/∂v Φ_v + [0 0 ∂a/∂ω ∂a/∂ln m].
-                    let (dadv, dadw) = self.prop.flight.accel_jacobians(&self.s.vel, &self.s.spin);
-                    let mut dv = dadv * self.phi_v;
-                    dv.fixed_view_mut::<3, 3>(0, 6).add_assign(&dadw);
-                    dv.column_mut(DRAG).sub_assign(&(self.s.vel * (k_d * self.s.vel.norm())));
-                    self.phi_p += self.phi_v * step + dv * (0.5 * step * step);
-                    self.phi_v += dv * step;
+                    self.phi.step(&self.prop.flight, &self.s, step);
                     self.s = self.prop.rk4(&self.s, step);
                 }
                 self.t = sample.t;
             }
             let r = sample.pos - self.s.pos;
-            self.h += self.phi_p.transpose() * self.phi_p * w2;
-            self.g += self.phi_p.transpose() * r * w2;
+            let j = &self.phi.pos;
+            self.h += j.transpose() * j * w2;
+            self.g += j.transpose() * r * w2;
             self.cost += r.norm_squared() * w2;
         }
     }
@@ -194,7 +180,7 @@ pub(crate) enum Progress {
 #[derive(Copy, Clone, Debug)]
 pub(crate) struct Batch {
     /// How many of the window's samples it reads.
-    pub n: usize,
+    n: usize,
     /// The physics it reads against (the drag it finds multiplies this).
     pub prop: Propagator,
     priors: Priors,

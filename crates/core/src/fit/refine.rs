@@ -34,10 +34,8 @@
 
 use nalgebra::{SMatrix, SVector};
 
-use std::ops::{AddAssign, SubAssign};
-
 use super::Sample;
-use crate::physics::{BallState, FlightScales, FlightVariation, Propagator, Vec3};
+use crate::physics::{BallState, FlightScales, FlightVariation, Propagator, Sensitivities, Vec3};
 
 /// Parameters: position (3), velocity (3), spin (3), ln drag and ln lift multipliers.
 const NP: usize = 11;
@@ -161,20 +159,11 @@ fn residuals(prop: &Propagator, samples: &[Sample], theta: &VP, mut f: impl FnMu
 
 /// The Gauss–Newton normal equations JᵀWJ and JᵀWr of the residuals at
 /// θ (weights `w`, σ), J from one trajectory and its sensitivities to θ
-/// (Φ for position and velocity, 6×11: the spin and the multipliers are
-/// constant in flight), integrated with it to second order per RK4 step;
-/// the drag's column is driven by the drag (∂a/∂ln m_D = −k_D‖v‖v), the
-/// lift's by the lift (∂a/∂ln m_L = k_M ω×v).
+/// ([`Sensitivities`]) integrated with it.
 fn normal_equations(prop: &Propagator, samples: &[Sample], theta: &VP, w: &[f64], sigma: f64) -> (MP, VP) {
     let prop = scaled(prop, theta);
-    let f = &prop.flight;
     let mut s = to_state(theta);
-    let mut phi_p = SMatrix::<f64, 3, NP>::zeros();
-    let mut phi_v = SMatrix::<f64, 3, NP>::zeros();
-    for k in 0..3 {
-        phi_p[(k, k)] = 1.0;
-        phi_v[(k, k + 3)] = 1.0;
-    }
+    let mut phi = Sensitivities::<NP>::new(Some(DRAG), Some(LIFT));
     let mut jtj = MP::zeros();
     let mut jtr = VP::zeros();
     let mut t = samples[0].t;
@@ -184,13 +173,7 @@ fn normal_equations(prop: &Propagator, samples: &[Sample], theta: &VP, w: &[f64]
             let n = (span / prop.dt).ceil().max(1.0);
             let h = span / n;
             for _ in 0..n as usize {
-                let (dadv, dadw) = f.accel_jacobians(&s.vel, &s.spin);
-                let mut dv = dadv * phi_v;
-                dv.fixed_view_mut::<3, 3>(0, 6).add_assign(&dadw);
-                dv.column_mut(DRAG).sub_assign(&(s.vel * (f.k_d() * s.vel.norm())));
-                dv.column_mut(LIFT).add_assign(&(s.spin.cross(&s.vel) * f.k_m(&s.vel, &s.spin)));
-                phi_p += phi_v * h + dv * (0.5 * h * h);
-                phi_v += dv * h;
+                phi.step(&prop.flight, &s, h);
                 s = prop.rk4(&s, h);
             }
         }
@@ -200,8 +183,8 @@ fn normal_equations(prop: &Propagator, samples: &[Sample], theta: &VP, w: &[f64]
         }
         let r = s.pos - obs.pos;
         let wi = w[i] / (sigma * sigma);
-        jtj += phi_p.transpose() * phi_p * wi;
-        jtr += phi_p.transpose() * r * wi;
+        jtj += phi.pos.transpose() * phi.pos * wi;
+        jtr += phi.pos.transpose() * r * wi;
     }
     (jtj, jtr)
 }

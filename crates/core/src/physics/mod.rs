@@ -1,7 +1,8 @@
 //! Ball physics in the table frame T (DESIGN §2, §3): the flight model
 //! (drag, Magnus lift, gravity), the table and net, the table bounce, the
-//! bat's rubber (the racket contact), and a fixed-step RK4 propagator that
-//! stops at events (bounce, net, hitting plane). Pure functions of their
+//! bat's rubber (the racket contact), a fixed-step RK4 propagator that
+//! stops at events (bounce, net, hitting plane), and a flight's
+//! sensitivities to its start and its drag and lift. Pure functions of their
 //! inputs: no clock, no I/O, no allocation.
 
 pub mod bounce;
@@ -9,6 +10,7 @@ pub mod flight;
 pub mod params;
 pub mod propagate;
 pub mod racket;
+pub mod sensitivity;
 pub mod table;
 
 pub use bounce::BounceModel;
@@ -16,6 +18,7 @@ pub use flight::{FlightModel, FlightScales, LiftModel};
 pub use params::{FlightVariation, PhysicsParams};
 pub use propagate::{Event, Propagator, StopAt};
 pub use racket::{Bat, Impact, RacketModel, RacketParams, Regime};
+pub use sensitivity::Sensitivities;
 pub use table::Table;
 
 /// A 3-vector in SI units in the table frame.
