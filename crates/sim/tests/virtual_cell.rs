@@ -118,6 +118,7 @@ fn returns_over_seeds() {
     let balls = std::env::var("BALLS").map_or(27, |s| s.parse().expect("BALLS: an integer"));
     let (mut reach, mut hit, mut returned, mut rates_over, mut clamped) = (0, 0, 0, 0, 0);
     let mut miss = Vec::new();
+    let (mut plan_err, mut tracking) = (Vec::new(), Vec::new());
     for &seed in &seeds {
         let r = run_virtual(&DemoConfig { balls, seed, ..DemoConfig::default() }, &cal);
         rates_over += r.mock.rates_over;
@@ -127,6 +128,8 @@ fn returns_over_seeds() {
             hit += b.hit as usize;
             returned += b.returned as usize;
             miss.extend(b.hit_err_mm);
+            plan_err.extend(b.plan_err_mm);
+            tracking.extend(b.tracking_err_mm);
             if !(b.hit && b.returned) {
                 eprintln!(
                     "seed {seed} ball {:2} {:15} spin {:?} rps, read {:?}; miss {:.1} mm; {} {}",
@@ -142,12 +145,18 @@ fn returns_over_seeds() {
         }
         eprintln!("{}", summary(&r));
     }
-    miss.sort_by(f64::total_cmp);
+    let median = |v: &mut Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v.get(v.len() / 2).copied().unwrap_or(f64::NAN)
+    };
     eprintln!(
         "seeds {seeds:?} × {balls} balls: {hit} of {reach} reachable hit ({:.1} %), {returned} returned ({:.1} %), \
-         median miss {:.1} mm; {rates_over} axis-rate overs, {clamped} safety-clamped cycles",
+         median miss {:.1} mm (last plan vs truth {:.1} mm, bat vs last plan {:.1} mm); \
+         {rates_over} axis-rate overs, {clamped} safety-clamped cycles",
         100.0 * hit as f64 / reach as f64,
         100.0 * returned as f64 / reach as f64,
-        miss.get(miss.len() / 2).copied().unwrap_or(f64::NAN)
+        median(&mut miss),
+        median(&mut plan_err),
+        median(&mut tracking)
     );
 }

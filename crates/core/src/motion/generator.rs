@@ -24,6 +24,16 @@
 //! starts from the state the last setpoint was sampled from, so the joint
 //! path stays continuous in velocity and acceleration across plan changes.
 //!
+//! A time-optimal stroke ends in limit-bound acceleration towards a
+//! non-zero velocity, where Ruckig answers even a millimetre's refinement
+//! by arriving late. So a stroke is first planned at [`HEADROOM_FRACTION`]
+//! of the acceleration where it still arrives on time (and its run-up stays
+//! inside the workspace box), and a refinement that a new stroke would
+//! meet late is blended onto the committed one ([`super::blend`]: a quintic
+//! correction per axis) where the sum stays within the limits. Only where
+//! neither works does the old weighing apply: a late new stroke against
+//! keeping the old one.
+//!
 //! Ruckig is only asked to calculate when the target changes (a new plan,
 //! or a phase change); other cycles sample the stored trajectory. With six
 //! stack-allocated DOFs it does not allocate on success (the counting
@@ -43,6 +53,7 @@
 
 use rsruckig::prelude::*;
 
+use super::blend::Blend;
 use super::limits::unwrap_near;
 use super::reach;
 use super::{MotionLimits, Pose6};
@@ -76,6 +87,14 @@ const RETRY_NUDGES_S: [f64; 4] = [-0.0003, 0.0003, -0.0007, 0.0007];
 /// Share of each axis's speed and acceleration a stroke may use (the rest
 /// absorbs the lag's feed-forward and the refinements to come).
 pub const JOINT_LIMIT_FRACTION: f64 = 0.97;
+/// Share of the stroke's acceleration (and jerk) a plan is first tried
+/// at, where it still arrives on time: a time-optimal stroke ends in
+/// limit-bound acceleration, where a refinement can only arrive late; the
+/// rest is room for blending refinements in ([`super::blend`]).
+pub const HEADROOM_FRACTION: f64 = 0.7;
+/// Instants between now and the hit at which a stroke with headroom or a
+/// blend is checked.
+const PATH_CHECKS: usize = 16;
 /// Time for an axis to reach full acceleration (sets the jerk limit), s.
 pub const JERK_RAMP_S: f64 = 0.0125;
 /// Share of the stroke's limits for follow-through and return.
@@ -198,6 +217,8 @@ pub struct StrokeGenerator {
     t0: f64,
     phase: Phase,
     target: Option<StrokeTarget>,
+    /// A refinement blended onto `traj` (approach only).
+    blend: Option<Blend>,
     /// The last sampled joint state and its time.
     q: [f64; AXES],
     qd: [f64; AXES],
@@ -212,6 +233,8 @@ pub struct StrokeGenerator {
     pub failures: u64,
     /// Refinements not taken because they would arrive late.
     pub kept: u64,
+    /// Refinements blended onto the committed stroke.
+    pub blended: u64,
 }
 
 fn secs(t: Instant) -> f64 {
@@ -231,6 +254,7 @@ impl StrokeGenerator {
             t0: 0.0,
             phase: Phase::Hold,
             target: None,
+            blend: None,
             q: home_joints.0,
             qd: [0.0; AXES],
             qdd: [0.0; AXES],
@@ -240,6 +264,7 @@ impl StrokeGenerator {
             calculations: 0,
             failures: 0,
             kept: 0,
+            blended: 0,
         };
         g.set_limit_scale(1.0);
         g.reset(now, start);
@@ -415,14 +440,33 @@ impl StrokeGenerator {
         let target = self.target_of(plan)?;
         let duration = target.hit_time - self.t_last;
         // Keep the current stroke aside: a refinement that can no longer be
-        // met on time (the axes are already in their final, limit-bound
-        // acceleration) but differs only a little is not worth arriving late.
+        // met on time by a new stroke may be blended onto it, and one that
+        // cannot be blended either but differs only a little is not worth
+        // arriving late.
         std::mem::swap(&mut self.traj, &mut self.spare);
-        let (old_t0, old_target, old_phase) = (self.t0, self.target, self.phase);
+        let (old_t0, old_target, old_phase, old_blend) = (self.t0, self.target, self.phase, self.blend);
         let restore = |g: &mut Self| {
             std::mem::swap(&mut g.traj, &mut g.spare);
             g.t0 = old_t0;
+            g.blend = old_blend;
         };
+        // A new or refined stroke with headroom, where it arrives on time.
+        if self.calculate_with_headroom(&target, duration) {
+            return Ok(self.take(target, 0.0));
+        }
+        // Late, for the same ball: blend the change onto the committed
+        // stroke where the axes allow it.
+        let same_ball = old_phase == Phase::Approach
+            && old_target.is_some_and(|old| (old.hit_time - target.hit_time).abs() <= KEEP_MAX_DT_S);
+        if same_ball && old_target.is_some_and(|old| old.hit_time > self.t_last) {
+            restore(self);
+            if self.blend_to(&target) {
+                self.blended += 1;
+                return Ok(self.take(target, 0.0));
+            }
+            std::mem::swap(&mut self.traj, &mut self.spare);
+        }
+        // At the full limits.
         if !self.calculate(&target.joints.0, &target.joint_velocity, Some(duration)) {
             restore(self);
             return Err(PlanRejected::NoTrajectory);
@@ -438,8 +482,6 @@ impl StrokeGenerator {
             self.calculate(&target.joints.0, &target.joint_velocity, Some(duration + nudge));
         }
         let late_by = (self.traj.get_duration() - duration).max(0.0);
-        let same_ball = old_phase == Phase::Approach
-            && old_target.is_some_and(|old| (old.hit_time - target.hit_time).abs() <= KEEP_MAX_DT_S);
         if late_by > MAX_LATE_S && !same_ball {
             restore(self);
             return Err(PlanRejected::TooLate);
@@ -457,10 +499,73 @@ impl StrokeGenerator {
             self.late_by = 0.0;
             return Ok(self.target.as_ref().expect("old target"));
         }
+        Ok(self.take(target, late_by))
+    }
+
+    /// `target` is the stroke's now, arriving `late_by` late.
+    fn take(&mut self, target: StrokeTarget, late_by: f64) -> &StrokeTarget {
         self.late_by = late_by;
         self.phase = Phase::Approach;
         self.target = Some(target);
-        Ok(self.target.as_ref().expect("just set"))
+        self.target.as_ref().expect("just set")
+    }
+
+    /// The stroke to `target` at [`HEADROOM_FRACTION`] of the stroke's
+    /// acceleration and jerk, if that arrives on time: true, and it is the
+    /// trajectory. Not tried where an axis already accelerates harder.
+    fn calculate_with_headroom(&mut self, target: &StrokeTarget, duration: f64) -> bool {
+        let l = &self.lim.arm.limits;
+        let gentle = HEADROOM_FRACTION * JOINT_LIMIT_FRACTION;
+        if (0..AXES).any(|i| self.qdd[i].abs() > l.acceleration[i] * gentle) {
+            return false;
+        }
+        self.set_acceleration_scale(HEADROOM_FRACTION);
+        let on_time = self.calculate(&target.joints.0, &target.joint_velocity, Some(duration))
+            && self.traj.get_duration() - duration <= LATE_TOLERANCE_S;
+        self.set_acceleration_scale(1.0);
+        // A gentler stroke runs up from further back: only within the box.
+        on_time
+            && (1..=PATH_CHECKS).all(|k| {
+                let t = self.t_last + duration * k as f64 / PATH_CHECKS as f64;
+                self.sample_base(t).is_some_and(|(q, _, _)| self.in_box(&q))
+            })
+    }
+
+    /// The TCP of joints `q` is inside the workspace box.
+    fn in_box(&self, q: &[f64; AXES]) -> bool {
+        let p = self.lim.arm.tcp(&Joints(*q)).to_pose6();
+        (0..3).all(|i| p[i] >= self.lim.lo[i] && p[i] <= self.lim.hi[i])
+    }
+
+    /// Blends the change from the committed stroke's hitting state to
+    /// `target`'s onto it ([`Blend`]), if stroke and blend together stay
+    /// within [`JOINT_LIMIT_FRACTION`] of the axes' speed and acceleration
+    /// and the TCP inside the workspace box (checked at [`PATH_CHECKS`]
+    /// instants): true, and the blend is in place.
+    fn blend_to(&mut self, target: &StrokeTarget) -> bool {
+        let (t_now, t_hit) = (self.t_last, target.hit_time);
+        let Some((base_q, base_qd, _)) = self.sample_base(t_hit) else { return false };
+        let x1 = core::array::from_fn(|i| target.joints.0[i] - base_q[i]);
+        let v1 = core::array::from_fn(|i| target.joint_velocity[i] - base_qd[i]);
+        let now = self.blend.map_or([[0.0; AXES]; 3], |b| b.at(t_now));
+        let Some(blend) = Blend::new(t_now, t_hit - t_now, &now, &x1, &v1) else { return false };
+        let l = &self.lim.arm.limits;
+        for k in 1..=PATH_CHECKS {
+            let t = t_now + (t_hit - t_now) * k as f64 / PATH_CHECKS as f64;
+            let (Some((q, qd, qdd)), b) = (self.sample_base(t), blend.at(t)) else { return false };
+            if !self.in_box(&core::array::from_fn(|i| q[i] + b[0][i])) {
+                return false;
+            }
+            let over = (0..AXES).any(|i| {
+                (qd[i] + b[1][i]).abs() > l.speed[i] * JOINT_LIMIT_FRACTION
+                    || (qdd[i] + b[2][i]).abs() > l.acceleration[i] * JOINT_LIMIT_FRACTION
+            });
+            if over {
+                return false;
+            }
+        }
+        self.blend = Some(blend);
+        true
     }
 
     /// Replaces the state the next plan starts from (after the safety
@@ -497,7 +602,10 @@ impl StrokeGenerator {
         let t = secs(t);
         // Phase changes at the end of each segment (at most three chain).
         for _ in 0..3 {
-            let end = self.t0 + self.traj.get_duration();
+            let end = match self.blend {
+                Some(b) if self.phase == Phase::Approach => b.end(),
+                _ => self.t0 + self.traj.get_duration(),
+            };
             if t < end || self.phase == Phase::Hold {
                 break;
             }
@@ -553,26 +661,50 @@ impl StrokeGenerator {
         ok
     }
 
+    /// Ruckig's acceleration and jerk: [`JOINT_LIMIT_FRACTION`] of the
+    /// axes', times `s` (the speed limit as it is).
+    fn set_acceleration_scale(&mut self, s: f64) {
+        let l = &self.lim.arm.limits;
+        for i in 0..AXES {
+            let a = l.acceleration[i] * JOINT_LIMIT_FRACTION * s;
+            self.input.max_acceleration[i] = a;
+            self.input.max_jerk[i] = a / JERK_RAMP_S;
+        }
+    }
+
     /// Ruckig's limits: [`JOINT_LIMIT_FRACTION`] of the axes', times `s`.
     fn set_limit_scale(&mut self, s: f64) {
         let l = &self.lim.arm.limits;
         for i in 0..AXES {
-            let a = l.acceleration[i] * JOINT_LIMIT_FRACTION * s;
             self.input.max_velocity[i] = l.speed[i] * JOINT_LIMIT_FRACTION * s;
-            self.input.max_acceleration[i] = a;
-            self.input.max_jerk[i] = a / JERK_RAMP_S;
         }
+        self.set_acceleration_scale(s);
     }
 
     /// Samples the trajectory at absolute time `t` into the joint state. An
     /// empty trajectory (every axis at rest at its target) leaves the
     /// joints as they are: Ruckig samples its disabled axes as zeros.
     fn sample_into_state(&mut self, t: f64) {
-        if self.traj.get_duration() <= 0.0 {
+        let Some((q, qd, qdd)) = self.sample_base(t) else {
             self.qd = [0.0; AXES];
             self.qdd = [0.0; AXES];
             self.t_last = t;
             return;
+        };
+        let b = self.blend.map_or([[0.0; AXES]; 3], |b| b.at(t));
+        for i in 0..AXES {
+            self.q[i] = q[i] + b[0][i];
+            self.qd[i] = qd[i] + b[1][i];
+            self.qdd[i] = qdd[i] + b[2][i];
+        }
+        self.t_last = t;
+    }
+
+    /// `traj` (without the blend) at absolute time `t`: joints, speeds,
+    /// accelerations; `None` for an empty trajectory.
+    fn sample_base(&self, t: f64) -> Option<([f64; AXES], [f64; AXES], [f64; AXES])> {
+        if self.traj.get_duration() <= 0.0 {
+            return None;
         }
         let mut p = DataArrayOrVec::Stack([0.0; 6]);
         let mut v = DataArrayOrVec::Stack([0.0; 6]);
@@ -580,17 +712,13 @@ impl StrokeGenerator {
         let mut section = None;
         let dt = (t - self.t0).max(0.0);
         self.traj.at_time(dt, &mut Some(&mut p), &mut Some(&mut v), &mut Some(&mut a), &mut None, &mut section);
-        for i in 0..AXES {
-            self.q[i] = p[i];
-            self.qd[i] = v[i];
-            self.qdd[i] = a[i];
-        }
-        self.t_last = t;
+        Some((core::array::from_fn(|i| p[i]), core::array::from_fn(|i| v[i]), core::array::from_fn(|i| a[i])))
     }
 
     /// A new joint trajectory from the state at `t_last` to `pos` with
     /// velocity `vel`; false (and the old trajectory kept) if Ruckig fails.
     fn calculate(&mut self, pos: &[f64; AXES], vel: &[f64; AXES], min_duration: Option<f64>) -> bool {
+        self.blend = None;
         for i in 0..AXES {
             self.input.current_position[i] = self.q[i];
             self.input.current_velocity[i] = self.qd[i];
@@ -664,3 +792,7 @@ impl StrokeGenerator {
         ok
     }
 }
+
+#[cfg(test)]
+#[path = "generator_tests.rs"]
+mod tests;

@@ -7,7 +7,9 @@
 //! - [`generator`]: the stroke — reach the hitting pose at the hitting time
 //!   with the bat velocity, follow through, return home — generated online
 //!   with Ruckig (jerk-limited, continuous in velocity and acceleration) and
-//!   re-planned whenever a refined plan arrives.
+//!   re-planned whenever a refined plan arrives; a refinement the
+//!   committed axes can no longer meet by re-planning is blended in
+//!   (`blend`: a quintic correction on top of the stroke).
 //! - [`reach`]: what the arm can do at a hitting point — the face tilts
 //!   it can present there and the fastest bat its axes deliver — for the
 //!   aim, and the joint checks the generator applies to every stroke.
@@ -20,6 +22,7 @@
 //! A/B/C = rotations about Z/Y/X, angles unwrapped (continuous, near home).
 //! This module never reads a clock and never allocates per cycle.
 
+mod blend;
 pub mod generator;
 pub mod limits;
 pub mod reach;

@@ -1,0 +1,102 @@
+//! The stroke generator on a virtual clock: refinements that arrive while
+//! the axes are committed are met on time, within the limits.
+
+use super::*;
+use crate::calib::Calibration;
+use crate::physics::Vec3;
+use crate::plan::EulerZyx;
+use crate::time::Duration;
+
+const T0: u64 = 1_000_000_000;
+const CYCLE: Duration = Duration::from_millis(4);
+
+fn generator() -> StrokeGenerator {
+    let lim = MotionLimits::from_robot(&Calibration::default_cell().robot);
+    let home = lim.home;
+    StrokeGenerator::new(lim, Instant(T0), home)
+}
+
+/// A forehand at (1.6, y, z) in T, `hit_ms` after T0, the face tilted by
+/// `tilt` rad.
+fn plan(seq: u32, y: f64, z: f64, tilt: f64, hit_ms: u64) -> StrikePlan {
+    StrikePlan {
+        seq,
+        trajectory: 1,
+        made_at: Instant(T0),
+        hit_time: Instant(T0 + hit_ms * 1_000_000),
+        position: Vec3::new(1.6, y, z),
+        velocity: crate::estimator::aim::bat_velocity(tilt, 0.0, 1.5),
+        orientation: EulerZyx { a: 0.0, b: tilt, c: 0.0 },
+        spin: Vec3::zeros(),
+        confidence: 1.0,
+    }
+}
+
+/// Runs the generator cycle by cycle from cycle `from` to `to` (exclusive),
+/// checking the joints' speed and acceleration (finite differences over a
+/// cycle, as the controller sees them) against the axes' limits.
+fn run(g: &mut StrokeGenerator, from: u64, to: u64, prev: &mut Vec<[f64; AXES]>) {
+    let l = g.limits().arm.limits.clone();
+    let dt = g.limits().dt;
+    for k in from..to {
+        g.next(Instant(T0 + CYCLE.0 * k));
+        prev.push(g.joints().0);
+        if let [.., a, b, c] = prev.as_slice() {
+            for i in 0..AXES {
+                let (v0, v1) = ((b[i] - a[i]) / dt, (c[i] - b[i]) / dt);
+                assert!(v1.abs() <= l.speed[i], "cycle {k} axis {i}: {v1} rad/s");
+                assert!(((v1 - v0) / dt).abs() <= l.acceleration[i], "cycle {k} axis {i}: {} rad/s²", (v1 - v0) / dt);
+            }
+        }
+    }
+}
+
+#[test]
+fn a_late_refinement_is_blended_in_and_met_on_time() {
+    let mut g = generator();
+    let mut q = Vec::new();
+    // The first plan: 400 ms ahead (100 cycles).
+    g.set_plan(&plan(1, 0.1, 0.25, 0.2, 400)).expect("reachable");
+    run(&mut g, 1, 75, &mut q);
+    // 100 ms before the hit the ball is read 4 mm higher and the face 1°
+    // more open.
+    let refined = plan(2, 0.1, 0.254, 0.2 + 1f64.to_radians(), 400);
+    let target = *g.set_plan(&refined).expect("taken");
+    assert_eq!(target.seq, 2, "the refinement is the stroke's target");
+    assert_eq!((g.late_by(), g.blended, g.kept), (0.0, 1, 0), "blended, not late or kept");
+    run(&mut g, 75, 100, &mut q);
+    // At the hitting time the bat is where the refinement put it.
+    let at_hit = g.next(Instant(T0 + 400_000_000));
+    q.push(g.joints().0);
+    for i in 0..6 {
+        assert!((at_hit[i] - target.pose[i]).abs() < 1e-6, "axis {i}: {at_hit:?} vs {:?}", target.pose);
+    }
+    run(&mut g, 101, 200, &mut q);
+}
+
+#[test]
+fn refinements_close_to_the_hit_are_blended_rather_than_late() {
+    // Refinements every cycle from 120 to 60 ms before the hit, each half
+    // a millimetre and a tenth of a degree from the last: every one met
+    // on time, the later ones by blends (a new stroke would be late).
+    let mut g = generator();
+    let mut q = Vec::new();
+    g.set_plan(&plan(1, -0.1, 0.3, 0.1, 400)).expect("reachable");
+    run(&mut g, 1, 70, &mut q);
+    for k in 70..85u64 {
+        let d = (k - 69) as f64;
+        let p = plan(k as u32, -0.1 + 0.0005 * d, 0.3 + 0.0003 * d, 0.1 + 0.1f64.to_radians() * d, 400);
+        let t = *g.set_plan(&p).expect("taken");
+        assert_eq!((t.seq, g.late_by()), (k as u32, 0.0), "cycle {k}: kept {} blended {}", g.kept, g.blended);
+        run(&mut g, k, k + 1, &mut q);
+    }
+    assert!(g.blended > 0, "the last refinements are blends");
+    assert_eq!(g.kept, 0);
+    run(&mut g, 85, 100, &mut q);
+    let at_hit = g.next(Instant(T0 + 400_000_000));
+    q.push(g.joints().0);
+    let target = g.target().expect("the stroke's");
+    assert_eq!(target.seq, 84);
+    assert!((0..6).all(|i| (at_hit[i] - target.pose[i]).abs() < 1e-6), "{at_hit:?} vs {:?}", target.pose);
+    run(&mut g, 101, 200, &mut q);
+}
