@@ -36,7 +36,7 @@ fn plan(seq: u32, y: f64, z: f64, tilt: f64, hit_ms: u64) -> StrikePlan {
 /// checking the joints' speed and acceleration (finite differences over a
 /// cycle, as the controller sees them) against the axes' limits.
 fn run(g: &mut StrokeGenerator, from: u64, to: u64, prev: &mut Vec<[f64; AXES]>) {
-    let l = g.limits().arm.limits.clone();
+    let l = g.limits().arm.limits;
     let dt = g.limits().dt;
     for k in from..to {
         g.next(Instant(T0 + CYCLE.0 * k));
