@@ -103,8 +103,8 @@ fn every_tracker_fault_at_once_is_survived_and_counted_exactly() {
 }
 
 /// The measurement behind the README's virtual-cell numbers (not a check):
-/// `SEEDS=1,2,3,4,5,7 BALLS=27 cargo test --release --test virtual_cell --
-/// --ignored --nocapture` prints every ball not returned (or missed) with
+/// `SEEDS=1,2,3,4,5,7 BALLS=27 [CORRECTION=axis] cargo test --release
+/// --test virtual_cell -- --ignored --nocapture` prints every ball not returned (or missed) with
 /// the judge's reason and the totals over the seeds.
 #[test]
 #[ignore = "a measurement: run it by name"]
@@ -120,7 +120,11 @@ fn returns_over_seeds() {
     let mut miss = Vec::new();
     let (mut plan_err, mut tracking) = (Vec::new(), Vec::new());
     for &seed in &seeds {
-        let r = run_virtual(&DemoConfig { balls, seed, ..DemoConfig::default() }, &cal);
+        let mut cfg = DemoConfig { balls, seed, ..DemoConfig::default() };
+        if let Ok(c) = std::env::var("CORRECTION") {
+            cfg.runtime.correction = c.parse().expect("CORRECTION: cartesian or axis");
+        }
+        let r = run_virtual(&cfg, &cal);
         rates_over += r.mock.rates_over;
         clamped += r.session.safety_clamped;
         for b in r.per_ball.iter().filter(|b| b.reachable) {

@@ -28,7 +28,7 @@
 //! non-zero velocity, where Ruckig answers even a millimetre's refinement
 //! by arriving late. So a stroke is first planned at [`HEADROOM_FRACTION`]
 //! of the acceleration where it still arrives on time (and its run-up stays
-//! inside the workspace box), and a refinement that a new stroke would
+//! where a target may be: inside the box and the joint margins), and a refinement that a new stroke would
 //! meet late is blended onto the committed one ([`super::blend`]: a quintic
 //! correction per axis) where the sum stays within the limits. Only where
 //! neither works does the old weighing apply: a late new stroke against
@@ -523,25 +523,31 @@ impl StrokeGenerator {
         let on_time = self.calculate(&target.joints.0, &target.joint_velocity, Some(duration))
             && self.traj.get_duration() - duration <= LATE_TOLERANCE_S;
         self.set_acceleration_scale(1.0);
-        // A gentler stroke runs up from further back: only within the box.
+        // A gentler stroke runs up from further back: only where a
+        // stroke's target could be.
         on_time
             && (1..=PATH_CHECKS).all(|k| {
                 let t = self.t_last + duration * k as f64 / PATH_CHECKS as f64;
-                self.sample_base(t).is_some_and(|(q, _, _)| self.in_box(&q))
+                self.sample_base(t).is_some_and(|(q, _, _)| self.clear(&q))
             })
     }
 
-    /// The TCP of joints `q` is inside the workspace box.
-    fn in_box(&self, q: &[f64; AXES]) -> bool {
-        let p = self.lim.arm.tcp(&Joints(*q)).to_pose6();
+    /// Joints `q` are where a stroke may pass: inside the software limits
+    /// with [`LIMIT_MARGIN_RAD`], clear of the singularities on the side
+    /// the axes are on, the TCP inside the workspace box.
+    fn clear(&self, q: &[f64; AXES]) -> bool {
+        let q = Joints(*q);
+        let p = self.lim.arm.tcp(&q).to_pose6();
         (0..3).all(|i| p[i] >= self.lim.lo[i] && p[i] <= self.lim.hi[i])
+            && reach::inside_margin(&self.lim, &q).is_ok()
+            && reach::clear_of_singularities(&self.lim, &Joints(self.q), &q, self.wrist()).is_ok()
     }
 
     /// Blends the change from the committed stroke's hitting state to
     /// `target`'s onto it ([`Blend`]), if stroke and blend together stay
     /// within [`JOINT_LIMIT_FRACTION`] of the axes' speed and acceleration
-    /// and the TCP inside the workspace box (checked at [`PATH_CHECKS`]
-    /// instants): true, and the blend is in place.
+    /// and [`Self::clear`] (checked at [`PATH_CHECKS`] instants): true, and
+    /// the blend is in place.
     fn blend_to(&mut self, target: &StrokeTarget) -> bool {
         let (t_now, t_hit) = (self.t_last, target.hit_time);
         let Some((base_q, base_qd, _)) = self.sample_base(t_hit) else { return false };
@@ -553,7 +559,7 @@ impl StrokeGenerator {
         for k in 1..=PATH_CHECKS {
             let t = t_now + (t_hit - t_now) * k as f64 / PATH_CHECKS as f64;
             let (Some((q, qd, qdd)), b) = (self.sample_base(t), blend.at(t)) else { return false };
-            if !self.in_box(&core::array::from_fn(|i| q[i] + b[0][i])) {
+            if !self.clear(&core::array::from_fn(|i| q[i] + b[0][i])) {
                 return false;
             }
             let over = (0..AXES).any(|i| {
