@@ -627,3 +627,39 @@ fn stream_crops(
     }
     Ok(sent)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::launcher::Setting;
+    use topspin_core::physics::BallState;
+    use topspin_core::plan::EulerZyx;
+
+    /// A bat logged every 4 ms that stands still where the ball passes
+    /// 2 ms after a sample: the distance at the samples is the ball's
+    /// 2 ms of flight (about 14 mm at 7 m/s), the closest approach 0.
+    #[test]
+    fn the_closest_approach_is_taken_between_the_controllers_samples() {
+        let cal = Calibration::default_cell();
+        let prop = cal.propagator();
+        let ball = BallState::new(Vec3::new(0.5, 0.1, 0.3), Vec3::new(7.0, 0.0, 0.5), Vec3::zeros());
+        let launch = Launch { setting: Setting::ALL[0], state: ball };
+        let launched = Instant(1_000_000_000);
+        let t_hit = launched + Duration::from_millis(102);
+        let at = true_state_at_secs(&launch, &prop, 0.102).pos;
+        let times: Vec<Instant> = (0..60).map(|k| launched + Duration::from_millis(4 * k)).collect();
+        let bat = BatPath::from_poses(&times, &vec![at; times.len()], &vec![EulerZyx::default(); times.len()]);
+        let sampled = times
+            .iter()
+            .filter(|t| t.0.abs_diff(t_hit.0) <= HIT_WINDOW.0)
+            .map(|t| (at - true_state_at_secs(&launch, &prop, t.secs_since(launched)).pos).norm())
+            .fold(f64::INFINITY, f64::min);
+        let closest = closest_approach(&bat, &launch, &prop, launched, t_hit).expect("the bat is logged there");
+        assert!(sampled > 0.012, "{sampled}");
+        assert!(closest < 0.0005, "{closest}");
+    }
+
+    fn true_state_at_secs(launch: &Launch, prop: &Propagator, t: f64) -> BallState {
+        Flight::new(launch, prop).at(t)
+    }
+}

@@ -92,9 +92,14 @@ pub const JOINT_LIMIT_FRACTION: f64 = 0.97;
 /// limit-bound acceleration, where a refinement can only arrive late; the
 /// rest is room for blending refinements in ([`super::blend`]).
 pub const HEADROOM_FRACTION: f64 = 0.7;
-/// Instants between now and the hit at which a stroke with headroom or a
-/// blend is checked.
+/// Instants between now and the hit at which the path of a stroke with
+/// headroom or a blend is checked.
 const PATH_CHECKS: usize = 16;
+/// A blend's speeds and accelerations are checked this often, s (a
+/// jerk ramp is 12.5 ms) …
+const RATE_CHECK_S: f64 = 0.001;
+/// … at most this many times (a blend over 0.25 s is checked coarser).
+const MAX_RATE_CHECKS: usize = 256;
 /// Time for an axis to reach full acceleration (sets the jerk limit), s.
 pub const JERK_RAMP_S: f64 = 0.0125;
 /// Share of the stroke's limits for follow-through and return.
@@ -546,8 +551,8 @@ impl StrokeGenerator {
     /// Blends the change from the committed stroke's hitting state to
     /// `target`'s onto it ([`Blend`]), if stroke and blend together stay
     /// within [`JOINT_LIMIT_FRACTION`] of the axes' speed and acceleration
-    /// and [`Self::clear`] (checked at [`PATH_CHECKS`] instants): true, and
-    /// the blend is in place.
+    /// (checked every [`RATE_CHECK_S`]) and [`Self::clear`] (at about
+    /// [`PATH_CHECKS`] instants): true, and the blend is in place.
     fn blend_to(&mut self, target: &StrokeTarget) -> bool {
         let (t_now, t_hit) = (self.t_last, target.hit_time);
         let Some((base_q, base_qd, _)) = self.sample_base(t_hit) else { return false };
@@ -556,17 +561,18 @@ impl StrokeGenerator {
         let now = self.blend.map_or([[0.0; AXES]; 3], |b| b.at(t_now));
         let Some(blend) = Blend::new(t_now, t_hit - t_now, &now, &x1, &v1) else { return false };
         let l = &self.lim.arm.limits;
-        for k in 1..=PATH_CHECKS {
-            let t = t_now + (t_hit - t_now) * k as f64 / PATH_CHECKS as f64;
+        // Speeds and accelerations every RATE_CHECK_S (the stroke's own
+        // acceleration turns within a jerk ramp), the path at PATH_CHECKS.
+        let d = t_hit - t_now;
+        let n = ((d / RATE_CHECK_S).ceil() as usize).clamp(PATH_CHECKS, MAX_RATE_CHECKS);
+        for k in 1..=n {
+            let t = t_now + d * k as f64 / n as f64;
             let (Some((q, qd, qdd)), b) = (self.sample_base(t), blend.at(t)) else { return false };
-            if !self.clear(&core::array::from_fn(|i| q[i] + b[0][i])) {
-                return false;
-            }
             let over = (0..AXES).any(|i| {
                 (qd[i] + b[1][i]).abs() > l.speed[i] * JOINT_LIMIT_FRACTION
                     || (qdd[i] + b[2][i]).abs() > l.acceleration[i] * JOINT_LIMIT_FRACTION
             });
-            if over {
+            if over || (k * PATH_CHECKS % n < PATH_CHECKS && !self.clear(&core::array::from_fn(|i| q[i] + b[0][i]))) {
                 return false;
             }
         }
