@@ -27,12 +27,12 @@
 //! A time-optimal stroke ends in limit-bound acceleration towards a
 //! non-zero velocity, where Ruckig answers even a millimetre's refinement
 //! by arriving late. So a stroke is first planned at [`HEADROOM_FRACTION`]
-//! of the acceleration where it still arrives on time (and its run-up stays
-//! where a target may be: inside the box and the joint margins), and a refinement that a new stroke would
-//! meet late is blended onto the committed one ([`super::blend`]: a quintic
-//! correction per axis) where the sum stays within the limits. Only where
-//! neither works does the old weighing apply: a late new stroke against
-//! keeping the old one.
+//! of the acceleration where it still arrives on time and its run-up stays
+//! where a target may be (inside the box and the joint margins), and a
+//! refinement that a new stroke would meet late is blended onto the
+//! committed one ([`super::blend`]: a quintic correction per axis) where
+//! the sum stays within the limits. Only where neither works does the old
+//! weighing apply: a late new stroke against keeping the old one.
 //!
 //! Ruckig is only asked to calculate when the target changes (a new plan,
 //! or a phase change); other cycles sample the stored trajectory. With six
