@@ -646,20 +646,16 @@ mod tests {
         let launch = Launch { setting: Setting::ALL[0], state: ball };
         let launched = Instant(1_000_000_000);
         let t_hit = launched + Duration::from_millis(102);
-        let at = true_state_at_secs(&launch, &prop, 0.102).pos;
+        let at = crate::true_state_at(&launch, &prop, 0.102).pos;
         let times: Vec<Instant> = (0..60).map(|k| launched + Duration::from_millis(4 * k)).collect();
         let bat = BatPath::from_poses(&times, &vec![at; times.len()], &vec![EulerZyx::default(); times.len()]);
         let sampled = times
             .iter()
             .filter(|t| t.0.abs_diff(t_hit.0) <= HIT_WINDOW.0)
-            .map(|t| (at - true_state_at_secs(&launch, &prop, t.secs_since(launched)).pos).norm())
+            .map(|t| (at - crate::true_state_at(&launch, &prop, t.secs_since(launched)).pos).norm())
             .fold(f64::INFINITY, f64::min);
         let closest = closest_approach(&bat, &launch, &prop, launched, t_hit).expect("the bat is logged there");
         assert!(sampled > 0.012, "{sampled}");
         assert!(closest < 0.0005, "{closest}");
-    }
-
-    fn true_state_at_secs(launch: &Launch, prop: &Propagator, t: f64) -> BallState {
-        Flight::new(launch, prop).at(t)
     }
 }

@@ -104,8 +104,9 @@ fn every_tracker_fault_at_once_is_survived_and_counted_exactly() {
 
 /// The measurement behind the README's virtual-cell numbers (not a check):
 /// `SEEDS=1,2,3,4,5,7 BALLS=27 [CORRECTION=axis] cargo test --release
-/// --test virtual_cell -- --ignored --nocapture` prints every ball not returned (or missed) with
-/// the judge's reason and the totals over the seeds.
+/// --test virtual_cell -- --ignored --nocapture` prints every ball not
+/// returned (or missed) with the judge's reason and the totals over the
+/// seeds.
 #[test]
 #[ignore = "a measurement: run it by name"]
 fn returns_over_seeds() {
