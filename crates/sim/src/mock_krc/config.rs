@@ -296,7 +296,7 @@ mod tests {
         assert!(c.axiscorr && !c.poscorr);
         c.check_feeds(&e).unwrap();
         assert_eq!(c.axis_lower_deg, [-90.0, -60.0, -100.0, -150.0, -66.0, -180.0]);
-        assert_eq!(c.axis_upper_deg, [90.0, 90.0, 30.0, 150.0, 45.0, 180.0]);
+        assert_eq!(c.axis_upper_deg, [90.0, 90.0, 34.0, 150.0, 45.0, 180.0]);
         assert_eq!(c.axis_mon_max_deg, [95.0, 95.0, 105.0, 155.0, 70.0, 185.0]);
         let r = Calibration::default_cell().robot;
         assert_eq!(c.timeout, r.rsi.late_limit);
@@ -322,7 +322,7 @@ mod tests {
         );
         assert_ne!(bad, AXIS_CONTEXT_XML);
         assert!(matches!(ContextConfig::parse(&bad), Err(RsiFileError::Bad { .. })));
-        let bad = AXIS_CONTEXT_XML.replace("ParamValue=\"30.0\"", "ParamValue=\"-5.0\"");
+        let bad = AXIS_CONTEXT_XML.replace("ParamValue=\"34.0\"", "ParamValue=\"-5.0\"");
         assert_ne!(bad, AXIS_CONTEXT_XML);
         assert!(matches!(ContextConfig::parse(&bad), Err(RsiFileError::Bad { .. })));
     }
