@@ -31,6 +31,8 @@
 //! halves the step from the best point; the best point is kept, and the
 //! filter's own where no pass beats it.
 
+use std::ops::{AddAssign, SubAssign};
+
 use nalgebra::{SMatrix, SVector};
 
 use super::ekf::COV_STEP;
@@ -127,14 +129,8 @@ impl Pass {
         while self.cursor < end.min(window.len()) {
             let sample = window[self.cursor];
             self.cursor += 1;
-            let dt = sample.t - self.t;
-            if dt > 0.0 {
-                let steps = (dt / COV_STEP).ceil().max(1.0);
-                let step = dt / steps;
-                for _ in 0..steps as usize {
-                    self.phi.step(&self.prop.flight, &self.s, step);
-                    self.s = self.prop.rk4(&self.s, step);
-                }
+            if sample.t > self.t {
+                self.phi.fly(&self.prop, &mut self.s, sample.t - self.t, COV_STEP);
                 self.t = sample.t;
             }
             let r = sample.pos - self.s.pos;
@@ -302,8 +298,6 @@ pub(crate) fn smooth(prop: &Propagator, window: &[Sample], last: &BallState, pri
         }
     }
 }
-
-use std::ops::{AddAssign, SubAssign};
 
 #[cfg(test)]
 mod tests {

@@ -168,15 +168,7 @@ fn normal_equations(prop: &Propagator, samples: &[Sample], theta: &VP, w: &[f64]
     let mut jtr = VP::zeros();
     let mut t = samples[0].t;
     for (i, obs) in samples.iter().enumerate() {
-        let span = obs.t - t;
-        if span > 0.0 {
-            let n = (span / prop.dt).ceil().max(1.0);
-            let h = span / n;
-            for _ in 0..n as usize {
-                phi.step(&prop.flight, &s, h);
-                s = prop.rk4(&s, h);
-            }
-        }
+        phi.fly(&prop, &mut s, obs.t - t, prop.dt);
         t = obs.t;
         if w[i] == 0.0 {
             continue;

@@ -10,7 +10,7 @@ use std::ops::{AddAssign, SubAssign};
 
 use nalgebra::SMatrix;
 
-use super::{BallState, FlightModel};
+use super::{BallState, FlightModel, Propagator};
 
 /// Φ for `N` unknowns: columns 0–2 the initial position, 3–5 the initial
 /// velocity, 6–8 the spin (constant in flight), and where given the
@@ -56,13 +56,27 @@ impl<const N: usize> Sensitivities<N> {
         self.pos += self.vel * h + dv * (0.5 * h * h);
         self.vel += dv * h;
     }
+
+    /// Flies `s` on by `span` s under `prop` (RK4, equal steps of at most
+    /// `max_step`) and Φ with it.
+    pub fn fly(&mut self, prop: &Propagator, s: &mut BallState, span: f64, max_step: f64) {
+        if span <= 0.0 {
+            return;
+        }
+        let n = (span / max_step).ceil().max(1.0);
+        let h = span / n;
+        for _ in 0..n as usize {
+            self.step(&prop.flight, s, h);
+            *s = prop.rk4(s, h);
+        }
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::calib::Calibration;
-    use crate::physics::{FlightScales, Propagator, Vec3};
+    use crate::physics::{FlightScales, Vec3};
 
     /// Φ after 0.3 s of a fast topspin flight against forward differences
     /// of the flight itself, within 1 % (the Jacobian at each step's start:
@@ -84,11 +98,7 @@ mod tests {
         let x0: [f64; 11] = [-1.8, 0.1, 0.35, 5.5, -0.2, 0.9, 20.0, 550.0, -40.0, 0.0, 0.0];
         let mut phi = Sensitivities::<11>::new(Some(9), Some(10));
         let mut s = start;
-        let h = 0.3 / 75.0;
-        for _ in 0..75 {
-            phi.step(&prop.flight, &s, h);
-            s = prop.rk4(&s, h);
-        }
+        phi.fly(&prop, &mut s, 0.3, 0.3 / 75.0);
         let end = fly(&x0);
         let differences: Vec<_> = (0..11)
             .map(|j| {
