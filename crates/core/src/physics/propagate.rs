@@ -208,66 +208,57 @@ impl Propagator {
             }
             let s0 = *state;
             let s1 = self.rk4(&s0, h);
-            // Candidate events, earliest wins.
-            let mut best: Option<(Kind, f64, BallState)> = None;
-            let mut consider = |kind: Kind, this: &Self| {
-                let (tau, s) = this.locate(kind, &s0, h, stop);
-                if best.is_none_or(|(_, t_best, _)| tau < t_best) {
-                    best = Some((kind, tau, s));
+            // The earliest event inside the step that applies: one that does
+            // not (the table crossed past its edge, the net plane beside or
+            // above the net) must not hide a later one in the same step.
+            let mut event: Option<(f64, Event, BallState)> = None;
+            let mut consider = |kind: Kind| {
+                let (tau, s) = self.locate(kind, &s0, h, stop);
+                let at = *t + tau;
+                let applies = match kind {
+                    Kind::Table if self.table.on_surface(s.pos.x, s.pos.y) && s.vel.z < 0.0 => {
+                        Some((Event::Bounce { t: at, before: s }, self.bounce.apply(&s)))
+                    }
+                    Kind::Net if self.table.touches_net(&Vec3::new(0.0, s.pos.y, s.pos.z), r) => {
+                        Some((Event::Net { t: at }, s))
+                    }
+                    Kind::HitPlane => Some((Event::HitPlane { t: at }, s)),
+                    Kind::Floor => Some((Event::Floor { t: at }, s)),
+                    Kind::Table | Kind::Net => None,
+                };
+                if let Some((e, after)) = applies
+                    && event.is_none_or(|(best, _, _)| tau < best)
+                {
+                    event = Some((tau, e, after));
                 }
             };
             if s0.pos.z - r > 0.0 && s1.pos.z - r <= 0.0 {
-                consider(Kind::Table, self);
+                consider(Kind::Table);
             }
             if stop.net && (s0.pos.x < 0.0) != (s1.pos.x < 0.0) {
-                consider(Kind::Net, self);
+                consider(Kind::Net);
             }
             if let Some(x) = stop.hit_plane_x
                 && s0.pos.x < x
                 && s1.pos.x >= x
             {
-                consider(Kind::HitPlane, self);
+                consider(Kind::HitPlane);
             }
             if self.g(Kind::Floor, &s1, stop) <= 0.0 {
-                consider(Kind::Floor, self);
+                consider(Kind::Floor);
             }
-            let Some((kind, tau, s)) = best else {
-                *state = s1;
-                *t += h;
-                if h < self.dt {
-                    return Event::TimeLimit { t: *t };
-                }
-                continue;
-            };
-            match kind {
-                Kind::Table if self.table.on_surface(s.pos.x, s.pos.y) && s.vel.z < 0.0 => {
+            match event {
+                Some((tau, event, s)) => {
                     *t += tau;
-                    *state = self.bounce.apply(&s);
-                    return Event::Bounce { t: *t, before: s };
+                    *state = s;
+                    return event;
                 }
-                Kind::Table => {
-                    // Past the table's edge: keep flying.
+                None => {
                     *state = s1;
                     *t += h;
-                }
-                Kind::Net if self.table.touches_net(&Vec3::new(0.0, s.pos.y, s.pos.z), r) => {
-                    *t += tau;
-                    *state = s;
-                    return Event::Net { t: *t };
-                }
-                Kind::Net => {
-                    *state = s1;
-                    *t += h;
-                }
-                Kind::HitPlane => {
-                    *t += tau;
-                    *state = s;
-                    return Event::HitPlane { t: *t };
-                }
-                Kind::Floor => {
-                    *t += tau;
-                    *state = s;
-                    return Event::Floor { t: *t };
+                    if h < self.dt {
+                        return Event::TimeLimit { t: *t };
+                    }
                 }
             }
         }
@@ -307,6 +298,20 @@ mod tests {
         let a = coarse.fly(&s, 0.4);
         let b = fine.fly(&s, 0.4);
         assert!((a.pos - b.pos).norm() < 1e-6, "{}", (a.pos - b.pos).norm());
+    }
+
+    #[test]
+    fn an_event_that_does_not_apply_hides_no_later_one_in_its_step() {
+        // Past the table's far edge (x 1.37) the ball drops through the
+        // table's height at x ≈ 1.42 and crosses the plane x = 1.6 in the
+        // same long step: the first is no bounce, the second is the hit.
+        let mut prop = paper();
+        prop.dt = 0.06;
+        let mut s = BallState::new(Vec3::new(1.30, 0.0, 0.03), Vec3::new(6.0, 0.0, -0.5), Vec3::zeros());
+        let mut t = 0.0;
+        let e = prop.advance(&mut s, &mut t, &StopAt { t_max: 1.0, hit_plane_x: Some(1.6), net: true });
+        assert!(matches!(e, Event::HitPlane { .. }), "{e:?}");
+        assert!((s.pos.x - 1.6).abs() < 1e-7 && s.pos.z < 0.02, "{s:?}");
     }
 
     #[test]
