@@ -78,7 +78,8 @@ pub struct EvalWorldsArgs {
 
 #[derive(Debug, Args)]
 #[command(after_help = "Examples:\n  topspin eval stream --balls 180 --world other-table\n  \
-    topspin eval stream --balls 180 --all-worlds --json   (every world as one session, learning on and off)")]
+    topspin eval stream --balls 180 --all-worlds --json   (every world as one session, learning on and off)\n  \
+    topspin eval stream --balls 180 --all-worlds --launcher   (the same balls' axes perpendicular to the flight)")]
 pub struct EvalStreamArgs {
     #[command(flatten)]
     pub set: SimSetArgs,
@@ -100,6 +101,15 @@ pub struct EvalStreamArgs {
     /// at the net, 0.25 s and 0.15 s before the hit.
     #[arg(long, conflicts_with_all = ["world", "no_learning"])]
     pub all_worlds: bool,
+    /// A world's balls from a wheel launcher: spin axes perpendicular to
+    /// the exit velocity (a world's own axes are skewed: sidespin about the
+    /// vertical, the others tipped up to 20° towards the flight).
+    #[arg(long)]
+    pub launcher: bool,
+    /// A world's balls all fly with its lift (by default each ball's own
+    /// lift is the world's ×0.85–1.15).
+    #[arg(long)]
+    pub same_lift: bool,
 }
 
 pub fn run(cmd: EvalCommand) -> anyhow::Result<()> {
@@ -254,6 +264,8 @@ fn run_stream(a: EvalStreamArgs) -> anyhow::Result<()> {
         dropout: a.dropout,
         world,
         learn: !a.no_learning,
+        launcher: a.launcher,
+        same_lift: a.same_lift,
         ..Default::default()
     };
     if a.all_worlds {
@@ -287,9 +299,15 @@ fn run_stream(a: EvalStreamArgs) -> anyhow::Result<()> {
     }
     let l = &report.learned;
     println!(
-        "\nWorld: {}. The EKF's session {}: drag × {:.3} of the calibration, table e {:.3}, μ {:.3} \
+        "\nWorld: {}{}. The EKF's session {}: drag × {:.3} of the calibration, table e {:.3}, μ {:.3} \
          (from {} bounces).",
         setup.world.unwrap_or("the calibration's own"),
+        match (setup.world.is_some(), setup.launcher, setup.same_lift) {
+            (true, true, false) => ", balls from a launcher (spin axes perpendicular)",
+            (true, false, true) => ", every ball with the world's lift",
+            (true, true, true) => ", balls from a launcher (spin axes perpendicular), every ball with the world's lift",
+            _ => "",
+        },
         if setup.learn { "learned" } else { "learned nothing (--no-learning)" },
         l.drag_scale,
         l.restitution,
@@ -306,10 +324,16 @@ fn run_stream_worlds(cal: &topspin_core::calib::Calibration, setup: &StreamSetup
         return Ok(());
     }
     println!(
-        "Streaming estimator, every world as one session of {} balls back to back, observed through the \
-         bounce, {} mm noise, {:.0}% dropouts; the EKF's latest plan, medians (p90 in brackets) over the \
+        "Streaming estimator, every world as one session of {} balls back to back ({}), observed through \
+         the bounce, {} mm noise, {:.0}% dropouts; the EKF's latest plan, medians (p90 in brackets) over the \
          balls whose true hit lies inside the hitting window:\n",
         setup.balls,
+        match (setup.launcher, setup.same_lift) {
+            (false, false) => "the worlds' skewed spin axes",
+            (true, false) => "from a launcher: spin axes perpendicular to the flight",
+            (false, true) => "the worlds' skewed spin axes, every ball with its world's lift",
+            (true, true) => "from a launcher: spin axes perpendicular to the flight, every ball with its world's lift",
+        },
         setup.noise_mm,
         setup.dropout * 100.0
     );

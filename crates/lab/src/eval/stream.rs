@@ -13,8 +13,8 @@ use topspin_core::physics::Vec3;
 use topspin_core::plan::StrikePlan;
 use topspin_core::stats::Summary;
 use topspin_core::time::Instant;
-use topspin_sim::worlds::{simulate_world_ball, world_named};
-use topspin_sim::{Setting, SimBall, TrackerModel, schedule, simulate_ball};
+use topspin_sim::worlds::{World, simulate_world_ball, world_named};
+use topspin_sim::{Setting, SimBall, SpinAxis, TrackerModel, schedule, simulate_ball};
 
 /// How the stream is made.
 #[derive(Copy, Clone, Debug, PartialEq, Serialize)]
@@ -31,6 +31,12 @@ pub struct StreamSetup {
     pub world: Option<&'static str>,
     /// The estimator learns drag and table across the session.
     pub learn: bool,
+    /// A world's balls come from a wheel launcher: spin axes perpendicular
+    /// to the exit velocity (the worlds' own axes are skewed, as players
+    /// make them).
+    pub launcher: bool,
+    /// A world's balls all fly with its lift (no ball-to-ball spread).
+    pub same_lift: bool,
 }
 
 impl Default for StreamSetup {
@@ -44,6 +50,8 @@ impl Default for StreamSetup {
             gap: 1.0,
             world: None,
             learn: true,
+            launcher: false,
+            same_lift: false,
         }
     }
 }
@@ -80,7 +88,11 @@ pub struct StreamReport {
 /// The simulated balls and their launch times on one clock.
 pub fn simulate_stream(cal: &Calibration, setup: &StreamSetup) -> (Vec<SimBall>, Vec<f64>) {
     let prop = cal.propagator();
-    let world = setup.world.and_then(|name| world_named(cal, name));
+    let world = setup.world.and_then(|name| world_named(cal, name)).map(|w| World {
+        axis: if setup.launcher { SpinAxis::Perpendicular } else { w.axis },
+        ball_lift: if setup.same_lift { (1.0, 1.0) } else { w.ball_lift },
+        ..w
+    });
     let base = TrackerModel { noise_sigma: setup.noise_mm * 1e-3, dropout: setup.dropout, ..TrackerModel::default() };
     let balls: Vec<SimBall> = (0..setup.balls)
         .filter_map(|k| {
@@ -295,5 +307,30 @@ fn world_session(cal: &Calibration, setup: &StreamSetup) -> WorldSession {
         truth,
         on,
         off,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_launcher_spins_its_balls_perpendicular_to_their_flight() {
+        let cal = Calibration::default_cell();
+        let along = |launcher: bool| -> f64 {
+            let setup = StreamSetup { balls: 18, world: Some("other-table"), launcher, ..StreamSetup::default() };
+            let (balls, _) = simulate_stream(&cal, &setup);
+            assert!(balls.len() >= 12);
+            balls
+                .iter()
+                .map(|b| {
+                    let (v, w) = (v3(b.truth.launch.vel), v3(b.truth.spin));
+                    v.normalize().dot(&w).abs() / w.norm().max(1.0)
+                })
+                .fold(0.0, f64::max)
+        };
+        assert!(along(true) < 1e-9, "{}", along(true));
+        // The world's own axes: sidespin about the vertical, others tipped.
+        assert!(along(false) > 0.1, "{}", along(false));
     }
 }
