@@ -17,11 +17,15 @@ fn summary(r: &VirtualRun) -> String {
     let median = err.get(err.len() / 2).copied().unwrap_or(f64::NAN);
     let returned = r.per_ball.iter().filter(|b| b.reachable && b.returned).count();
     format!(
-        "{} of {} reachable hit, {returned} returned, median miss {median:.1} mm; RSI {} cycles, {} late; ingest {:?}",
+        "{} of {} reachable hit, {returned} returned, median miss {median:.1} mm; RSI {} cycles, {} late, {} axis-rate \
+         overs, {} clamped{}; ingest {:?}",
         r.hits(),
         r.reachable(),
         r.mock.cycles,
         r.mock.late,
+        r.mock.rates_over,
+        r.session.safety_clamped,
+        r.mock.stopped.map_or(String::new(), |s| format!(", stopped: {s}")),
         r.ingest
     )
 }

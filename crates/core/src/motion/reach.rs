@@ -28,10 +28,15 @@ use crate::plan::EulerZyx;
 
 /// `q` at least [`LIMIT_MARGIN_RAD`] inside every software limit.
 pub(crate) fn inside_margin(lim: &MotionLimits, q: &Joints) -> Result<(), LimitViolation> {
+    inside_by(lim, q, LIMIT_MARGIN_RAD)
+}
+
+/// `q` at least `margin` rad inside every software limit.
+pub(crate) fn inside_by(lim: &MotionLimits, q: &Joints, margin: f64) -> Result<(), LimitViolation> {
     let l = &lim.arm.limits;
     for axis in Axis::ALL {
         let i = axis.index();
-        let (lo, hi) = (l.min[i] + LIMIT_MARGIN_RAD, l.max[i] - LIMIT_MARGIN_RAD);
+        let (lo, hi) = (l.min[i] + margin, l.max[i] - margin);
         if !(lo..=hi).contains(&q.0[i]) {
             let limit = if q.0[i] < lo { l.min[i] } else { l.max[i] };
             return Err(LimitViolation { axis, kind: LimitKind::Position, value: q.0[i], limit });
