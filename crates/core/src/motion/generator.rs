@@ -562,21 +562,25 @@ impl StrokeGenerator {
         self.path_all(duration, |q| self.clear(q))
     }
 
-    /// The stroke keeps the TCP in the workspace box (where the safety
-    /// filter would brake it) and the axes [`PATH_LIMIT_MARGIN_RAD`] inside
-    /// their software limits, at [`PATH_CHECKS`] instants over the next
-    /// `duration` s.
+    /// The stroke keeps the TCP in the workspace (box and orientation range,
+    /// where the safety filter would brake it) and the axes
+    /// [`PATH_LIMIT_MARGIN_RAD`] inside their software limits, at
+    /// [`PATH_CHECKS`] instants over the next `duration` s.
     fn path_within_limits(&self, duration: f64) -> bool {
         self.path_all(duration, |q| {
             let q = Joints(*q);
-            self.in_box(&q) && reach::inside_by(&self.lim, &q, PATH_LIMIT_MARGIN_RAD).is_ok()
+            self.in_workspace(&q) && reach::inside_by(&self.lim, &q, PATH_LIMIT_MARGIN_RAD).is_ok()
         })
     }
 
-    /// The TCP at joints `q` is inside the workspace box.
-    fn in_box(&self, q: &Joints) -> bool {
+    /// The TCP at joints `q` is inside the workspace box and its
+    /// orientation range, the limits the safety filter brakes at.
+    fn in_workspace(&self, q: &Joints) -> bool {
         let p = self.lim.arm.tcp(q).to_pose6();
-        (0..3).all(|i| p[i] >= self.lim.lo[i] && p[i] <= self.lim.hi[i])
+        (0..6).all(|i| {
+            let v = if i < 3 { p[i] } else { unwrap_near(p[i], self.lim.home[i]) };
+            v >= self.lim.lo[i] && v <= self.lim.hi[i]
+        })
     }
 
     fn path_all(&self, duration: f64, ok: impl Fn(&[f64; AXES]) -> bool) -> bool {
@@ -588,10 +592,10 @@ impl StrokeGenerator {
 
     /// Joints `q` are where a stroke may pass: inside the software limits
     /// with [`LIMIT_MARGIN_RAD`], clear of the singularities on the side
-    /// the axes are on, the TCP inside the workspace box.
+    /// the axes are on, the TCP inside the workspace (box and orientation).
     fn clear(&self, q: &[f64; AXES]) -> bool {
         let q = Joints(*q);
-        self.in_box(&q)
+        self.in_workspace(&q)
             && reach::inside_margin(&self.lim, &q).is_ok()
             && reach::clear_of_singularities(&self.lim, &Joints(self.q), &q, self.wrist()).is_ok()
     }
