@@ -101,6 +101,31 @@ fn refinements_close_to_the_hit_are_blended_rather_than_late() {
     run(&mut g, 101, 200, &mut q);
 }
 
+/// A generator caught mid-stroke (joints, speeds, accelerations as a
+/// virtual-cell run left them) and a ball `ahead` s from now: the plan it
+/// is asked to take next.
+fn caught(
+    q: [f64; AXES],
+    qd: [f64; AXES],
+    qdd: [f64; AXES],
+    ahead: f64,
+    ball: [f64; 9],
+) -> (StrokeGenerator, StrikePlan) {
+    let mut g = generator();
+    (g.q, g.qd, g.qdd) = (q, qd, qdd);
+    g.update_pose();
+    let now = g.t_last;
+    let plan = StrikePlan {
+        made_at: Instant::from_secs_f64(now),
+        hit_time: Instant::from_secs_f64(now + ahead),
+        position: Vec3::new(ball[0], ball[1], ball[2]),
+        velocity: Vec3::new(ball[3], ball[4], ball[5]),
+        orientation: EulerZyx { a: ball[6], b: ball[7], c: ball[8] },
+        ..plan(1, 0.0, 0.0, 0.0, 0)
+    };
+    (g, plan)
+}
+
 #[test]
 fn a_stroke_that_would_swing_an_axis_past_its_limit_is_refused() {
     // Seen in the virtual cell (seed 14, table e 0.909, μ 0.291): A3 at
@@ -108,20 +133,13 @@ fn a_stroke_that_would_swing_an_axis_past_its_limit_is_refused() {
     // 146°, 0.52 s ahead. At the full limits Ruckig's time-synchronised
     // profile swings A3 on to 156°, the software limit switch, to turn it
     // round; the controller stops there. The stroke is refused instead.
-    let mut g = generator();
-    g.q = [-0.0932287, -1.6821252, 2.1686777, 0.2283739, 1.1293998, -0.3124648];
-    g.qd = [-0.7338119, 0.6626882, 0.7266065, 2.8043475, -0.6992640, -3.6541560];
-    g.qdd = [0.0, 0.0, 4.4644511, -4.5072544, -8.7170344, -2.6644027];
-    g.update_pose();
-    let now = g.t_last;
-    let ball = StrikePlan {
-        made_at: Instant::from_secs_f64(now),
-        hit_time: Instant::from_secs_f64(now + 0.524372),
-        position: Vec3::new(1.6, 0.0451092, 0.2412270),
-        velocity: Vec3::new(-1.5319272, -0.0222555, 1.2855752),
-        orientation: EulerZyx { a: 0.0145268, b: 0.6981317, c: 0.5366887 },
-        ..plan(1, 0.0, 0.0, 0.0, 0)
-    };
+    let (mut g, ball) = caught(
+        [-0.0932287, -1.6821252, 2.1686777, 0.2283739, 1.1293998, -0.3124648],
+        [-0.7338119, 0.6626882, 0.7266065, 2.8043475, -0.6992640, -3.6541560],
+        [0.0, 0.0, 4.4644511, -4.5072544, -8.7170344, -2.6644027],
+        0.524372,
+        [1.6, 0.0451092, 0.2412270, -1.5319272, -0.0222555, 1.2855752, 0.0145268, 0.6981317, 0.5366887],
+    );
     assert!(matches!(g.set_plan(&ball), Err(PlanRejected::PathOutside)), "{:?}", g.set_plan(&ball));
 }
 
@@ -131,20 +149,13 @@ fn a_stroke_whose_run_up_leaves_the_workspace_is_refused() {
     // backspin ball 0.50 s ahead; the full-limit stroke runs up backwards
     // past the box's x_B = 0.30 wall, where the safety filter clamps it
     // (68 cycles, 5 axis-rate overs on the steps that followed).
-    let mut g = generator();
-    g.q = [0.0048996, -1.5590984, 2.2180093, -0.1097134, 1.0984816, 0.1734767];
-    g.qd = [-1.6769708, 1.2532275, 0.7946405, 1.3440457, -0.6106585, -2.1731866];
-    g.qdd = [0.0, 0.0, 0.0, 84.6484687, 0.0, -135.4375500];
-    g.update_pose();
-    let now = g.t_last;
-    let ball = StrikePlan {
-        made_at: Instant::from_secs_f64(now),
-        hit_time: Instant::from_secs_f64(now + 0.495246),
-        position: Vec3::new(1.6, 0.0260449, 0.1653068),
-        velocity: Vec3::new(-1.5317371, -0.0328318, 1.2855752),
-        orientation: EulerZyx { a: 0.0214311, b: 0.6981317, c: -0.5105088 },
-        ..plan(1, 0.0, 0.0, 0.0, 0)
-    };
+    let (mut g, ball) = caught(
+        [0.0048996, -1.5590984, 2.2180093, -0.1097134, 1.0984816, 0.1734767],
+        [-1.6769708, 1.2532275, 0.7946405, 1.3440457, -0.6106585, -2.1731866],
+        [0.0, 0.0, 0.0, 84.6484687, 0.0, -135.4375500],
+        0.495246,
+        [1.6, 0.0260449, 0.1653068, -1.5317371, -0.0328318, 1.2855752, 0.0214311, 0.6981317, -0.5105088],
+    );
     assert!(matches!(g.set_plan(&ball), Err(PlanRejected::PathOutside)), "{:?}", g.set_plan(&ball));
 }
 
