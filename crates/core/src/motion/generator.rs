@@ -14,7 +14,8 @@
 //! are checked at the target, and along the path: a time-synchronised
 //! profile may swing an axis well past its target to turn it round, so a
 //! stroke whose path comes within [`PATH_LIMIT_MARGIN_RAD`] of a limit or
-//! takes the TCP out of the box is refused), or sweep through a
+//! takes the TCP out of the workspace's box or orientation range is
+//! refused), or sweep through a
 //! singularity at speed. Each
 //! setpoint is the forward kinematics of the sampled joints: a TCP pose in
 //! B, as RSI's POSCORR wants it.
@@ -178,7 +179,8 @@ pub enum PlanRejected {
     #[error("stroke would arrive too late")]
     TooLate,
     /// The stroke's path would come within [`PATH_LIMIT_MARGIN_RAD`] of a
-    /// software limit switch or take the TCP out of the workspace box:
+    /// software limit switch or take the TCP out of the workspace (its box
+    /// or orientation range, where the safety filter brakes):
     /// Ruckig's fastest profile may swing an axis past its target to turn
     /// it round.
     #[error("stroke's path leaves the axes' range or the workspace")]
