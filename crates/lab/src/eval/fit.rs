@@ -33,11 +33,15 @@ pub struct MethodRow {
     pub spin_err_pct: Summary,
     /// Predicted vs true bounce point (x, y), mm.
     pub bounce_err_mm: Summary,
-    /// Predicted vs true crossing of the hitting plane (3D), mm.
+    /// Predicted vs true crossing of the hitting plane (3D), mm, over the
+    /// balls whose true crossing lies in the hitting window (the others,
+    /// off the table's end below its surface or out of reach, are no
+    /// stroke's: not scored).
     pub hit_err_mm: Summary,
-    /// Predicted vs true hitting time, ms.
+    /// Predicted vs true hitting time, ms, over the same balls.
     pub hit_dt_ms: Summary,
-    /// Balls the fit failed on or predicted no bounce/hit for.
+    /// Balls the fit failed on or predicted no bounce for, or no hit where
+    /// the true hit is in the hitting window.
     pub failures: usize,
 }
 
@@ -76,8 +80,11 @@ pub(crate) fn windowed(ball: &SimBall, window: Window) -> Vec<Sample> {
     ball.observations.iter().filter(|o| o.t < end).map(|o| Sample::new(o.t, o.pos)).collect()
 }
 
-/// Errors of one fit of one ball: (spin %, bounce mm, hit mm, hit ms).
-fn errors(ball: &SimBall, samples: &[Sample], cal: &Calibration, cfg: &FitConfig) -> Option<[f64; 4]> {
+/// Errors of one fit of one ball: (spin %, bounce mm), and (hit mm, hit
+/// ms) where the true hit lies in the hitting window.
+type BallErrors = ([f64; 2], Option<[f64; 2]>);
+
+fn errors(ball: &SimBall, samples: &[Sample], cal: &Calibration, cfg: &FitConfig) -> Option<BallErrors> {
     let fit = fit_trajectory(samples, &cal.propagator(), cfg).ok()?;
     let truth = &ball.truth;
     let spin = v3(truth.spin);
@@ -85,11 +92,14 @@ fn errors(ball: &SimBall, samples: &[Sample], cal: &Calibration, cfg: &FitConfig
     let tb = truth.bounce.as_ref()?;
     let pb = fit.prediction.bounce?;
     let bounce_err = (pb.pos.xy() - v3(tb.pos).xy()).norm() * 1e3;
+    if !topspin_sim::demo::reachable(cal, ball) {
+        return Some(([spin_err, bounce_err], None));
+    }
     let th = truth.hit.as_ref()?;
     let ph = fit.prediction.hit?;
     let hit_err = (ph.state.pos - v3(th.pos)).norm() * 1e3;
     let hit_dt = (ph.t - th.t).abs() * 1e3;
-    Some([spin_err, bounce_err, hit_err, hit_dt])
+    Some(([spin_err, bounce_err], Some([hit_err, hit_dt])))
 }
 
 /// One row per (window, method) for `balls` at `noise`.
@@ -103,7 +113,10 @@ pub fn accuracy(cal: &Calibration, balls: &[SimBall], noise: f64) -> Vec<MethodR
             let mut failures = 0;
             for ball in balls {
                 match errors(ball, &windowed(ball, window), cal, &cfg) {
-                    Some(e) => (0..4).for_each(|k| cols[k].push(e[k])),
+                    Some((e, hit)) => {
+                        (0..2).for_each(|k| cols[k].push(e[k]));
+                        hit.into_iter().for_each(|h| (0..2).for_each(|k| cols[2 + k].push(h[k])));
+                    }
                     None => failures += 1,
                 }
             }
