@@ -302,11 +302,10 @@ fn run_stream(a: EvalStreamArgs) -> anyhow::Result<()> {
         "\nWorld: {}{}. The EKF's session {}: drag × {:.3} of the calibration, table e {:.3}, μ {:.3} \
          (from {} bounces).",
         setup.world.unwrap_or("the calibration's own"),
-        match (setup.world.is_some(), setup.launcher, setup.same_lift) {
-            (true, true, false) => ", balls from a launcher (spin axes perpendicular)",
-            (true, false, true) => ", every ball with the world's lift",
-            (true, true, true) => ", balls from a launcher (spin axes perpendicular), every ball with the world's lift",
-            _ => "",
+        if setup.world.is_some() && (setup.launcher || setup.same_lift) {
+            format!(", {}", world_balls(&setup))
+        } else {
+            String::new()
         },
         if setup.learn { "learned" } else { "learned nothing (--no-learning)" },
         l.drag_scale,
@@ -315,6 +314,17 @@ fn run_stream(a: EvalStreamArgs) -> anyhow::Result<()> {
         l.bounces
     );
     Ok(())
+}
+
+/// How a world's balls are made (`--launcher`, `--same-lift`), for the
+/// tables' headings.
+fn world_balls(setup: &StreamSetup) -> String {
+    let axes = if setup.launcher {
+        "from a launcher: spin axes perpendicular to the flight"
+    } else {
+        "the worlds' skewed spin axes"
+    };
+    if setup.same_lift { format!("{axes}, every ball with its world's lift") } else { axes.to_owned() }
 }
 
 fn run_stream_worlds(cal: &topspin_core::calib::Calibration, setup: &StreamSetup, json: bool) -> anyhow::Result<()> {
@@ -328,12 +338,7 @@ fn run_stream_worlds(cal: &topspin_core::calib::Calibration, setup: &StreamSetup
          the bounce, {} mm noise, {:.0}% dropouts; the EKF's latest plan, medians (p90 in brackets) over the \
          balls whose true hit lies inside the hitting window:\n",
         setup.balls,
-        match (setup.launcher, setup.same_lift) {
-            (false, false) => "the worlds' skewed spin axes",
-            (true, false) => "from a launcher: spin axes perpendicular to the flight",
-            (false, true) => "the worlds' skewed spin axes, every ball with its world's lift",
-            (true, true) => "from a launcher: spin axes perpendicular to the flight, every ball with its world's lift",
-        },
+        world_balls(setup),
         setup.noise_mm,
         setup.dropout * 100.0
     );

@@ -15,10 +15,9 @@
 //! profile may swing an axis well past its target to turn it round, so a
 //! stroke whose path comes within [`PATH_LIMIT_MARGIN_RAD`] of a limit or
 //! takes the TCP out of the workspace's box or orientation range is
-//! refused), or sweep through a
-//! singularity at speed. Each
-//! setpoint is the forward kinematics of the sampled joints: a TCP pose in
-//! B, as RSI's POSCORR wants it.
+//! refused), or sweep through a singularity at speed. Each setpoint is the
+//! forward kinematics of the sampled joints: a TCP pose in B, as RSI's
+//! POSCORR wants it.
 //!
 //! The hitting time is met with Ruckig's `minimum_duration`: the
 //! time-optimal profile is stretched to end exactly at the hit. If the hit
