@@ -128,16 +128,23 @@ impl FlightModel {
 
     /// Magnus coefficient k_M at the given velocity and spin.
     pub fn k_m(&self, vel: &Vec3, spin: &Vec3) -> f64 {
-        self.k_m_at(vel.norm(), spin)
+        self.k_m_at(vel.norm(), spin.norm())
     }
 
-    /// k_M at speed `speed` (‖v‖, already known to the caller) and `spin`.
+    /// k_M at speed `speed` and spin rate `w` (‖v‖ and ‖ω‖, already known
+    /// to the caller).
     #[inline]
-    fn k_m_at(&self, speed: f64, spin: &Vec3) -> f64 {
+    fn k_m_at(&self, speed: f64, w: f64) -> f64 {
         match self.lift {
             LiftModel::Constant { c_m } => self.lift_scale * c_m,
-            LiftModel::Saturating { .. } | LiftModel::Crisis { .. } => {
-                let s = if speed > 1e-9 { self.radius * spin.norm() / speed } else { 0.0 };
+            // C_M / (1 + S/S½) with S = r‖ω‖/‖v‖, in one division (the
+            // flight's inner loop).
+            LiftModel::Saturating { c_m, s_half } => {
+                let d = speed * s_half + self.radius * w;
+                if speed > 1e-9 { self.lift_scale * c_m * (speed * s_half / d) } else { self.lift_scale * c_m }
+            }
+            LiftModel::Crisis { .. } => {
+                let s = if speed > 1e-9 { self.radius * w / speed } else { 0.0 };
                 self.lift_scale * self.lift.c_m(s)
             }
         }
@@ -196,8 +203,14 @@ impl FlightModel {
     /// The ball's acceleration at velocity `vel` with spin `spin`.
     #[inline]
     pub fn accel(&self, vel: &Vec3, spin: &Vec3) -> Vec3 {
+        self.accel_spinning(vel, spin, spin.norm())
+    }
+
+    /// [`Self::accel`] with ‖ω‖ = `w` known (constant over a flight step).
+    #[inline]
+    pub(crate) fn accel_spinning(&self, vel: &Vec3, spin: &Vec3, w: f64) -> Vec3 {
         let speed = vel.norm();
-        let mut a = vel * (-self.k_d * speed) + spin.cross(vel) * self.k_m_at(speed, spin);
+        let mut a = vel * (-self.k_d * speed) + spin.cross(vel) * self.k_m_at(speed, w);
         a.z -= self.gravity;
         a
     }

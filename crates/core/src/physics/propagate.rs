@@ -117,15 +117,15 @@ impl Propagator {
     #[inline]
     pub(crate) fn rk4(&self, s: &BallState, h: f64) -> BallState {
         let f = &self.flight;
-        let w = &s.spin;
+        let (w, rate) = (&s.spin, s.spin.norm());
         let v1 = s.vel;
-        let a1 = f.accel(&v1, w);
+        let a1 = f.accel_spinning(&v1, w, rate);
         let v2 = s.vel + a1 * (0.5 * h);
-        let a2 = f.accel(&v2, w);
+        let a2 = f.accel_spinning(&v2, w, rate);
         let v3 = s.vel + a2 * (0.5 * h);
-        let a3 = f.accel(&v3, w);
+        let a3 = f.accel_spinning(&v3, w, rate);
         let v4 = s.vel + a3 * h;
-        let a4 = f.accel(&v4, w);
+        let a4 = f.accel_spinning(&v4, w, rate);
         BallState {
             pos: s.pos + (v1 + (v2 + v3) * 2.0 + v4) * (h / 6.0),
             vel: s.vel + (a1 + (a2 + a3) * 2.0 + a4) * (h / 6.0),
