@@ -71,6 +71,12 @@ pub struct EvalWorldsArgs {
     /// Tracker noise levels, mm (comma-separated).
     #[arg(long, value_delimiter = ',', default_values_t = [1.0, 3.0])]
     pub noise_mm: Vec<f64>,
+    /// Fit with each world's own table (restitution, friction) instead of
+    /// the calibration's: what the fits make of a flight once the table is
+    /// known (the daemon learns it over a session; one flight before its
+    /// bounce cannot show it)
+    #[arg(long)]
+    pub known_table: bool,
     /// One JSON object instead of Markdown.
     #[arg(long)]
     pub json: bool,
@@ -160,14 +166,19 @@ fn run_worlds(a: EvalWorldsArgs) -> anyhow::Result<()> {
         check_noise(mm)?;
     }
     let noise: Vec<f64> = a.noise_mm.iter().map(|mm| mm * 1e-3).collect();
-    let reports = worlds::evaluate(&cal, a.seed, a.balls, &noise);
+    let reports = worlds::evaluate(&cal, a.seed, a.balls, &noise, a.known_table);
     if a.json {
-        println!("{}", serde_json::json!({"balls": a.balls, "seed": a.seed, "worlds": reports}));
+        println!(
+            "{}",
+            serde_json::json!({"balls": a.balls, "seed": a.seed, "known_table": a.known_table, "worlds": reports})
+        );
         return Ok(());
     }
+    let table = if a.known_table { "each world's own table (e, μ)" } else { "the calibration's table" };
     println!(
         "Batch fit in worlds unlike the estimator's model, {} balls per world and noise (nine settings, each \
-         ball its own drag and lift, skewed spin axes), seed {}. Medians, default (refined) / paper:\n",
+         ball its own drag and lift, skewed spin axes), seed {}, fitted with {table}. Medians, default \
+         (refined) / paper:\n",
         a.balls, a.seed
     );
     println!("| world | noise | window | spin err % | bounce err mm | hit err mm | hit Δt ms | failed |");
