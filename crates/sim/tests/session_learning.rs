@@ -50,7 +50,7 @@ fn what(p: &StrikePlan) -> (Instant, Instant, [f64; 3], [f64; 3]) {
 #[test]
 fn the_table_and_the_air_converge_to_the_worlds() {
     let cal = Calibration::default_cell();
-    for (name, tol_e, tol_mu, tol_drag) in [("other-table", 0.015, 0.03, 0.08), ("heavy-air", 0.015, 0.03, 0.1)] {
+    for (name, tol_e, tol_mu, tol_drag) in [("other-table", 0.015, 0.03, 0.025), ("heavy-air", 0.015, 0.03, 0.03)] {
         let world = world_named(&cal, name).unwrap();
         let (balls, launches) = session(&world, &cal, 60);
         let mut est = Estimator::new(&cal, config(LearnConfig::default()));
@@ -63,6 +63,8 @@ fn the_table_and_the_air_converge_to_the_worlds() {
         assert!(s.restitution.count >= 40, "{name}: {} bounces of {}", s.restitution.count, balls.len());
         assert!((s.restitution.value - world.physics.restitution).abs() < tol_e, "{name}: {s:?}");
         assert!((s.friction.value - world.physics.friction).abs() < tol_mu, "{name}: {s:?}");
+        // Read from the batches (the whole model): within 2–3 %; the cubic
+        // read 3–5 % low.
         assert!((s.drag.value - drag).abs() < tol_drag, "{name}: {s:?} (drag {drag})");
         // And it started from the calibration's table, which is further off.
         assert!(

@@ -123,6 +123,12 @@ pub const LIMIT_MARGIN_RAD: f64 = 10.0 * std::f64::consts::PI / 180.0;
 /// acceleration over half a second). 5° cost the virtual cell 2 of 144
 /// hits on seeds 14-19, 2° none.
 pub const PATH_LIMIT_MARGIN_RAD: f64 = 2.0 * std::f64::consts::PI / 180.0;
+/// How far inside the workspace box a stroke's path keeps the TCP at the
+/// [`PATH_CHECKS`], m: between them the TCP moves on by up to ~0.6 mm
+/// where it turns (a run-up's far end; seed 12 of the virtual cell: 0.1 mm
+/// past the wall between two checks, two cycles braked by the safety
+/// filter).
+pub const PATH_WALL_MARGIN_M: f64 = 0.002;
 /// A stroke's face keeps this far inside the workspace's orientation
 /// range (`workspace.abc_range_deg`), rad: the joint-space path into and
 /// out of the hitting pose turns the bat on past it, and the safety filter
@@ -574,13 +580,15 @@ impl StrokeGenerator {
         })
     }
 
-    /// The TCP at joints `q` is inside the workspace box and its
-    /// orientation range, the limits the safety filter brakes at.
+    /// The TCP at joints `q` is [`PATH_WALL_MARGIN_M`] inside the workspace
+    /// box and inside its orientation range, the limits the safety filter
+    /// brakes at.
     fn in_workspace(&self, q: &Joints) -> bool {
         let p = self.lim.arm.tcp(q).to_pose6();
         (0..6).all(|i| {
-            let v = if i < 3 { p[i] } else { unwrap_near(p[i], self.lim.home[i]) };
-            v >= self.lim.lo[i] && v <= self.lim.hi[i]
+            let (v, margin) =
+                if i < 3 { (p[i], PATH_WALL_MARGIN_M) } else { (unwrap_near(p[i], self.lim.home[i]), 0.0) };
+            v >= self.lim.lo[i] + margin && v <= self.lim.hi[i] - margin
         })
     }
 

@@ -144,6 +144,40 @@ fn a_stroke_that_would_swing_an_axis_past_its_limit_is_refused() {
 }
 
 #[test]
+fn a_run_up_that_turns_at_the_wall_stays_inside_the_box() {
+    // Seen in the virtual cell (seed 12): the bat winding up backwards at
+    // 0.2 mm from the box's wall x = 0.30 m, a topspin ball 0.37 s ahead.
+    // The stroke's path, checked at 16 instants, turned 0.1 mm past the
+    // wall between two of them, and the safety filter braked two cycles.
+    // Taken or refused, no setpoint over the next 0.4 s leaves the box.
+    let (mut g, ball) = caught(
+        [-0.1106579, -1.4571976, 2.3313237, 0.2733788, 1.0041098, -0.4468601],
+        [-1.2848735, 0.9945629, 1.0162632, 5.1706560, -0.7366346, -7.2094538],
+        [10.3918953, 0.0, 1.6179428, 24.2651205, 0.0, -1.5866891],
+        0.371392,
+        [
+            1.6,
+            -0.0085755,
+            0.1779067,
+            -1.6382635,
+            -0.0115387,
+            1.1471529,
+            0.0070431,
+            0.6108652,
+            std::f64::consts::FRAC_PI_6,
+        ],
+    );
+    let _ = g.set_plan(&ball);
+    let now = g.t_last;
+    for k in 1..=100 {
+        let p = g.next(Instant::from_secs_f64(now + 0.004 * k as f64));
+        for i in 0..3 {
+            assert!(p[i] >= g.lim.lo[i] && p[i] <= g.lim.hi[i], "cycle {k}, axis {i}: {p:?}");
+        }
+    }
+}
+
+#[test]
 fn a_stroke_whose_run_up_leaves_the_workspace_is_refused() {
     // Seen in the virtual cell (seed 12, table e 0.909, μ 0.291): a low
     // backspin ball 0.50 s ahead; the full-limit stroke runs up backwards
