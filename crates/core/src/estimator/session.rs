@@ -6,11 +6,13 @@
 //! step), with a fixed memory, and reset with the estimator (a restart or a
 //! new configuration).
 //!
-//! The measurements are closed-form and bounded in work (one cubic over a
-//! window): the session's drag once per ball when it bounces, the table
-//! when its track ends; a ball's own drag (weighed against the session's
-//! for the rest of its flight, [`LearnConfig::ball_drag_weight`]) every
-//! [`LearnConfig::ball_drag_every`] samples before its bounce.
+//! The measurements are bounded in work: the session's drag once per ball
+//! when it bounces (what the ball's batches read, `super::smooth`; where
+//! none has, one cubic over the window, [`drag_from_flight`], which reads
+//! 2–5 % low), the table when its track ends; a ball's own drag (weighed
+//! against the session's for the rest of its flight,
+//! [`LearnConfig::ball_drag_weight`]) every [`LearnConfig::ball_drag_every`]
+//! samples before its bounce, until a batch has read it.
 
 use crate::fit::Sample;
 use crate::fit::poly::Cubic;
