@@ -601,7 +601,9 @@ impl StrokeGenerator {
 
     /// Joints `q` are where a stroke may pass: inside the software limits
     /// with [`LIMIT_MARGIN_RAD`], clear of the singularities on the side
-    /// the axes are on, the TCP inside the workspace (box and orientation).
+    /// the axes are on, the TCP in the workspace as [`Self::in_workspace`]
+    /// has it ([`PATH_WALL_MARGIN_M`] inside the box, inside the
+    /// orientation range).
     fn clear(&self, q: &[f64; AXES]) -> bool {
         let q = Joints(*q);
         self.in_workspace(&q)
