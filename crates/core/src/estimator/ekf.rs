@@ -104,6 +104,25 @@ impl Ekf {
         state_of(&self.x)
     }
 
+    /// Replaces the spin's covariance with `cov` (symmetric positive
+    /// definite), keeping the filter's correlations of the spin with the
+    /// position and velocity in whitened form: P ← T P Tᵀ with T the
+    /// identity on position and velocity and A = L_new L_old⁻¹ on the spin
+    /// (L the Cholesky factors), so P stays a covariance. Unchanged where
+    /// either block is not positive definite.
+    pub fn set_spin_covariance(&mut self, cov: &Matrix3<f64>) {
+        let old = self.p.fixed_view::<3, 3>(6, 6).into_owned();
+        let (Some(l_old), Some(l_new)) = (old.cholesky(), cov.cholesky()) else { return };
+        let Some(l_old_inv) = l_old.l().try_inverse() else { return };
+        let cross = l_new.l() * l_old_inv * self.p.fixed_view::<3, 6>(6, 0);
+        if !(cross.iter().all(|v| v.is_finite())) {
+            return;
+        }
+        self.p.fixed_view_mut::<3, 6>(6, 0).copy_from(&cross);
+        self.p.fixed_view_mut::<6, 3>(0, 6).copy_from(&cross.transpose());
+        self.p.fixed_view_mut::<3, 3>(6, 6).copy_from(&((cov + cov.transpose()) * 0.5));
+    }
+
     /// Continuous-time Jacobian F of the flight at `s`.
     fn jacobian(prop: &Propagator, s: &BallState) -> M9 {
         let (dadv, dadw) = prop.flight.accel_jacobians(&s.vel, &s.spin);
@@ -293,6 +312,43 @@ mod tests {
                 prop_assert!(is_spd(&ekf.p), "after update {i}");
             }
         }
+    }
+
+    /// A filter that has run a while: correlated blocks throughout.
+    fn run_filter() -> Ekf {
+        let prop = Calibration::default_cell().propagator();
+        let truth = BallState::new(Vec3::new(-1.5, 0.0, 0.3), Vec3::new(6.0, 0.1, 0.8), Vec3::new(0.0, 300.0, 20.0));
+        let mut ekf = Ekf::new(0.0, &truth, 0.01, 0.5, 200.0, EkfNoise::default());
+        for i in 1..20 {
+            let t = i as f64 / 150.0;
+            ekf.predict(&prop, t);
+            ekf.update(&prop.fly(&truth, t).pos);
+        }
+        ekf
+    }
+
+    /// The spin's block becomes the one given; position and velocity keep
+    /// theirs, and their correlation with the spin keeps its form.
+    #[test]
+    fn the_spin_covariance_is_replaced_and_the_rest_kept() {
+        let mut ekf = run_filter();
+        let before = ekf.p;
+        let cov = Matrix3::new(25.0, 3.0, -1.0, 3.0, 100.0, 5.0, -1.0, 5.0, 16.0);
+        ekf.set_spin_covariance(&cov);
+        let p = &ekf.p;
+        assert!((p.fixed_view::<3, 3>(6, 6) - cov).abs().max() < 1e-9, "{p}");
+        assert_eq!(p.fixed_view::<6, 6>(0, 0), before.fixed_view::<6, 6>(0, 0));
+        assert!(is_spd(p));
+        // Whitened, the cross-covariance is the same: L⁻¹ P_sx on both sides.
+        let whiten = |m: &M9| {
+            let l = m.fixed_view::<3, 3>(6, 6).into_owned().cholesky().unwrap().l();
+            l.try_inverse().unwrap() * m.fixed_view::<3, 6>(6, 0)
+        };
+        assert!((whiten(p) - whiten(&before)).abs().max() < 1e-9 * whiten(&before).abs().max());
+        // Not a covariance: nothing changes.
+        let mut kept = ekf;
+        kept.set_spin_covariance(&Matrix3::new(1.0, 2.0, 0.0, 2.0, 1.0, 0.0, 0.0, 0.0, 1.0));
+        assert_eq!(kept.p, ekf.p);
     }
 
     #[test]

@@ -691,7 +691,8 @@ fn start_batch(track: &mut Track, prop: &Propagator, session: &Session, cfg: &Es
 
 /// Advances the track's batch ([`smooth::Batch`]) by a bounded share, and
 /// when it is done hands what it found to the filter: the spin it read
-/// (constant in flight), and the drag for the rest of the flight. The
+/// (constant in flight) with the uncertainty the window leaves it, and the
+/// drag for the rest of the flight. The
 /// filter keeps its position and velocity, which its latest samples set:
 /// the batch's, flown on from its window's end, would be millimetres off
 /// them, and the gate would take the next samples for another ball.
@@ -704,6 +705,13 @@ fn advance_batch(track: &mut Track, samples: usize) {
     if found.state.spin.iter().all(|v| v.is_finite()) {
         for k in 0..3 {
             track.ekf.x[6 + k] = found.state.spin[k];
+        }
+        // The filter's own spin covariance, from its linearisations, strays
+        // from the window's (σ 0.5–2× of it, p10–p90, on our own flights);
+        // at the bounce it sets how far the first samples after it move
+        // the velocity.
+        if let Some(cov) = &found.spin_cov {
+            track.ekf.set_spin_covariance(cov);
         }
         track.prop.flight = given.scaled(FlightScales { drag: found.drag, lift: 1.0 });
         track.smoothed = true;

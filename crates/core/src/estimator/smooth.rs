@@ -19,9 +19,10 @@
 //! (`physics.flight_variation.drag`): a heavy ball's slowing is not taken
 //! for lift. The spin along the first velocity keeps the filter's prior
 //! ([`super::EstimatorConfig::spin_prior_along_velocity`]) in information
-//! form, so a flight that shows that component moves it. Only the mean is
-//! replaced: the filter's covariance, which carries its process noise (the
-//! world is not quite the model), stays.
+//! form, so a flight that shows that component moves it. The filter takes
+//! the spin and its covariance from the window (the inverse of the normal
+//! equations with the priors, position, velocity and drag marginalised);
+//! its position and velocity and their covariance stay its own.
 //!
 //! Bounded, allocation-free and spread out: a [`Batch`] reads at most
 //! [`super::WINDOW_CAP`] samples per pass and [`PASSES`] passes, and the
@@ -33,7 +34,7 @@
 
 use std::ops::{AddAssign, SubAssign};
 
-use nalgebra::{SMatrix, SVector};
+use nalgebra::{Matrix3, SMatrix, SVector};
 
 use super::ekf::COV_STEP;
 use crate::fit::Sample;
@@ -85,6 +86,10 @@ pub(crate) struct Priors {
 pub(crate) struct Smoothed {
     pub state: BallState,
     pub drag: f64,
+    /// Covariance of the spin from the window (position, velocity and
+    /// drag marginalised), rad²/s²; `None` where the normal equations are
+    /// singular.
+    pub spin_cov: Option<Matrix3<f64>>,
 }
 
 fn state_of(x: &VN) -> BallState {
@@ -118,6 +123,8 @@ struct Finished {
     cost: f64,
     step: Option<VN>,
     last: BallState,
+    /// The normal equations with the priors (the inverse covariance).
+    h: MN,
 }
 
 impl Pass {
@@ -162,7 +169,7 @@ impl Pass {
             return None;
         }
         let step = self.h.cholesky().map(|c| c.solve(&self.g)).filter(|d| d.iter().all(|v| v.is_finite()));
-        Some(Finished { x, cost, step, last: self.s })
+        Some(Finished { x, cost, step, last: self.s, h: self.h })
     }
 }
 
@@ -298,7 +305,8 @@ impl Batch {
         // at the last sample move with the step by millimetres at most,
         // and the filter keeps its own.
         let state = BallState { spin: Vec3::new(x[6], x[7], x[8]), ..best.last };
-        Some(Smoothed { state, drag: x[DRAG].exp() })
+        let spin_cov = best.h.cholesky().map(|c| c.inverse().fixed_view::<3, 3>(6, 6).into_owned());
+        Some(Smoothed { state, drag: x[DRAG].exp(), spin_cov })
     }
 }
 
@@ -358,7 +366,7 @@ mod tests {
         let end = prop.fly(&truth, window.last().unwrap().t);
         // On noise-free samples the truth stays (or moves by the
         // integration's rounding).
-        if let Some(Smoothed { state: s, drag }) = smooth(&prop, &window, &end, &PRIORS) {
+        if let Some(Smoothed { state: s, drag, .. }) = smooth(&prop, &window, &end, &PRIORS) {
             assert!((drag - 1.0).abs() < 1e-6, "{drag}");
             assert!((s.spin - end.spin).norm() < 1e-3 && (s.pos - end.pos).norm() < 1e-7, "{s:?} vs {end:?}");
         }
@@ -444,6 +452,36 @@ mod tests {
         assert!(passes <= 2, "{passes} passes from the answer");
         assert!((again.state.spin - found.state.spin).norm() < CONVERGED_SPIN, "{again:?} vs {found:?}");
         assert!((again.state.spin - truth.spin).norm() < 0.05 * truth.spin.norm(), "{again:?}");
+    }
+
+    /// The spin's covariance is the scatter of what the batch reads: over
+    /// flights that differ only in their noise, the squared errors across
+    /// the flight weighed by it average two (χ² with two degrees of
+    /// freedom; along the flight the prior, right here, has the say).
+    #[test]
+    fn the_spin_covariance_matches_the_scatter() {
+        let prop = Calibration::default_cell().propagator();
+        let vel = Vec3::new(5.5, -0.1, 0.9);
+        let spin = Vec3::new(20.0, 350.0, -40.0);
+        let truth =
+            BallState::new(Vec3::new(-1.8, 0.05, 0.35), vel, spin - vel * (vel.dot(&spin) / vel.norm_squared()));
+        // A basis across the flight.
+        let along = vel.normalize();
+        let b1 = along.cross(&Vec3::z()).normalize();
+        let across = nalgebra::Matrix3x2::from_columns(&[b1, along.cross(&b1)]);
+        let mut rng = ChaCha8Rng::seed_from_u64(11);
+        let mut nees = Vec::new();
+        for _ in 0..40 {
+            let window = flight(&prop, &truth, 0.002, &mut rng);
+            let end = prop.fly(&truth, window.last().unwrap().t);
+            let found = smooth(&prop, &window, &BallState { spin: end.spin * 0.9, ..end }, &PRIORS).expect("improves");
+            let e = across.transpose() * (found.state.spin - truth.spin);
+            let cov = across.transpose() * found.spin_cov.expect("a covariance") * across;
+            nees.push((e.transpose() * cov.try_inverse().expect("invertible") * e)[0]);
+        }
+        let mean = nees.iter().sum::<f64>() / nees.len() as f64;
+        // 40 draws of χ²₂: the mean's σ is 0.32.
+        assert!((1.2..2.9).contains(&mean), "mean {mean:.2}");
     }
 
     /// The filter settles low on fast topspin; the batch does not.
