@@ -305,7 +305,11 @@ impl Batch {
         // at the last sample move with the step by millimetres at most,
         // and the filter keeps its own.
         let state = BallState { spin: Vec3::new(x[6], x[7], x[8]), ..best.last };
-        let spin_cov = best.h.cholesky().map(|c| c.inverse().fixed_view::<3, 3>(6, 6).into_owned());
+        // The spin's rows of H⁻¹: three solves, not the whole inverse.
+        let spin_cov = best.h.cholesky().map(|c| {
+            let unit = SMatrix::<f64, N, 3>::from_fn(|i, j| if i == 6 + j { 1.0 } else { 0.0 });
+            c.solve(&unit).fixed_rows::<3>(6).into_owned()
+        });
         Some(Smoothed { state, drag: x[DRAG].exp(), spin_cov })
     }
 }
