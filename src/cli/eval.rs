@@ -311,7 +311,7 @@ fn run_stream(a: EvalStreamArgs) -> anyhow::Result<()> {
     let l = &report.learned;
     println!(
         "\nWorld: {}{}. The EKF's session {}: drag × {:.3} of the calibration, table e {:.3}, μ {:.3} \
-         (from {} bounces).",
+         (from {} bounces), velocity σ left after a bounce {:.2}, {:.2}, {:.2} m/s (x, y, z).",
         setup.world.unwrap_or("the calibration's own"),
         if setup.world.is_some() && (setup.launcher || setup.same_lift) {
             format!(", {}", world_balls(&setup))
@@ -322,7 +322,10 @@ fn run_stream(a: EvalStreamArgs) -> anyhow::Result<()> {
         l.drag_scale,
         l.restitution,
         l.friction,
-        l.bounces
+        l.bounces,
+        l.bounce_vel[0].sqrt(),
+        l.bounce_vel[1].sqrt(),
+        l.bounce_vel[2].sqrt()
     );
     Ok(())
 }

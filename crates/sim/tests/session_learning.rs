@@ -11,7 +11,7 @@ use topspin_core::estimator::{Estimator, EstimatorConfig};
 use topspin_core::plan::StrikePlan;
 use topspin_core::time::Instant;
 use topspin_sim::worlds::{World, simulate_world_ball, world_named};
-use topspin_sim::{SimBall, TrackerModel, schedule};
+use topspin_sim::{SimBall, SpinAxis, TrackerModel, schedule};
 
 const NOISE: f64 = 0.002;
 
@@ -114,8 +114,34 @@ fn a_bad_ball_moves_what_was_learned_at_most_one_clipped_step() {
     assert!((after.restitution.value - before.restitution.value).abs() <= 0.08 * w + 1e-12, "{before:?} {after:?}");
     assert!((after.friction.value - before.friction.value).abs() <= 0.1 * w + 1e-12, "{before:?} {after:?}");
     assert!((after.drag.value - before.drag.value).abs() <= 0.3 * w + 1e-12, "{before:?} {after:?}");
+    for k in 0..3 {
+        let (a, b) = (after.bounce_vel[k].value, before.bounce_vel[k].value);
+        assert!((a - b).abs() <= 0.1 * w + 1e-12, "axis {k}: {b} → {a}");
+    }
     // It did pull the way the bad ball went.
     assert!(after.restitution.value < before.restitution.value, "{before:?} {after:?}");
+}
+
+/// What the table model leaves unexplained after a bounce is learned per
+/// axis: sideways where the spin along the flight (skewed axes) kicks the
+/// ball sideways at the bounce, which no trajectory before it shows; little
+/// where a launcher's axes leave the model nothing to miss.
+#[test]
+fn the_bounce_noise_is_learned_where_the_model_misses() {
+    let cal = Calibration::default_cell();
+    let learned = |axis: SpinAxis| {
+        let world = World { axis, ball_lift: (1.0, 1.0), ..world_named(&cal, "other-table").unwrap() };
+        let (balls, launches) = session(&world, &cal, 60);
+        let mut est = Estimator::new(&cal, config(LearnConfig::default()));
+        feed(&mut est, &balls, &launches);
+        est.session().bounce_noise()
+    };
+    let start = EstimatorConfig::default().noise.bounce_vel;
+    let (skewed, launcher) = (learned(SpinAxis::Skewed { max_deg: 20.0 }), learned(SpinAxis::Perpendicular));
+    // Sideways: (0.2 m/s)² and more where the axes are skewed, a quarter
+    // of that or less from a launcher; both moved off the start.
+    assert!(skewed.y > 0.03 && launcher.y < 0.25 * skewed.y, "skewed {skewed:?}, launcher {launcher:?}");
+    assert!(launcher.y < start.y && launcher.z < start.z, "launcher {launcher:?} from {start:?}");
 }
 
 #[test]
@@ -127,6 +153,7 @@ fn a_new_estimator_starts_from_the_calibration_and_learning_off_learns_nothing()
     assert_eq!(fresh.restitution.value, cal.physics.restitution);
     assert_eq!(fresh.friction.value, cal.physics.friction);
     assert_eq!(fresh.drag.value, 1.0);
+    assert_eq!(fresh.bounce_noise(), EstimatorConfig::default().noise.bounce_vel);
     assert_eq!(fresh.restitution.count, 0);
     let mut on = Estimator::new(&cal, config(LearnConfig::default()));
     feed(&mut on, &balls, &launches);

@@ -34,15 +34,17 @@ pub struct EkfNoise {
     pub accel: f64,
     /// Spin random walk, (rad/s)²/s.
     pub spin: f64,
-    /// Extra velocity variance at a bounce, (m/s)².
-    pub bounce_vel: f64,
+    /// Extra velocity variance at a bounce, per axis, (m/s)²: what the
+    /// bounce model leaves unexplained (a session learns it,
+    /// `super::session`).
+    pub bounce_vel: Vec3,
     /// Extra spin variance at a bounce, (rad/s)².
     pub bounce_spin: f64,
 }
 
 impl Default for EkfNoise {
     fn default() -> Self {
-        EkfNoise { measurement: 0.002, accel: 0.005, spin: 1.0, bounce_vel: 0.05, bounce_spin: 400.0 }
+        EkfNoise { measurement: 0.002, accel: 0.005, spin: 1.0, bounce_vel: Vec3::repeat(0.05), bounce_spin: 400.0 }
     }
 }
 
@@ -77,6 +79,10 @@ pub struct Ekf {
     pub bounces: u32,
     /// The state at the latest bounce's contact, just before the impact.
     pub last_contact: Option<BallState>,
+    /// The variance of each velocity component just after that impact
+    /// from the state's uncertainty before it (through the bounce's
+    /// Jacobian), before [`EkfNoise::bounce_vel`] is added.
+    pub contact_vel_var: Vec3,
 }
 
 fn state_of(x: &V9) -> BallState {
@@ -96,7 +102,7 @@ impl Ekf {
             p[(k + 3, k + 3)] = vel_std * vel_std;
             p[(k + 6, k + 6)] = spin_std * spin_std;
         }
-        Ekf { t, x: vec_of(state), p, noise, bounces: 0, last_contact: None }
+        Ekf { t, x: vec_of(state), p, noise, bounces: 0, last_contact: None, contact_vel_var: Vec3::zeros() }
     }
 
     /// The state `x` as a ball state.
@@ -202,8 +208,9 @@ impl Ekf {
                 Event::Bounce { t: tb, before } => {
                     let j = Self::bounce_jacobian(prop, &before);
                     self.p = j * self.p * j.transpose();
+                    self.contact_vel_var = Vec3::new(self.p[(3, 3)], self.p[(4, 4)], self.p[(5, 5)]);
                     for k in 3..6 {
-                        self.p[(k, k)] += self.noise.bounce_vel;
+                        self.p[(k, k)] += self.noise.bounce_vel[k - 3];
                         self.p[(k + 3, k + 3)] += self.noise.bounce_spin;
                     }
                     self.bounces += 1;

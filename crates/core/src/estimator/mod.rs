@@ -308,7 +308,7 @@ impl Estimator {
             next_id: 1,
             plan_seq: 0,
             last_prediction: None,
-            session: Session::new(&cal.physics.bounce_model()),
+            session: Session::new(&cal.physics.bounce_model(), &cfg.noise.bounce_vel),
             drag_variation: cal.physics.variation.drag,
         }
     }
@@ -328,15 +328,21 @@ impl Estimator {
         Propagator { bounce: self.session.bounce_model(&self.prop.bounce), ..self.prop.with_scales(scales) }
     }
 
-    /// Ends the track (if any) and learns the table from its bounce.
+    /// Ends the track (if any) and learns the table from its bounce, and
+    /// how much of the velocity after it the table left unexplained.
     fn end_track(&mut self) {
         let Some(track) = self.track.take() else { return };
         if !self.cfg.learn.enabled || track.ekf.bounces != 1 {
             return;
         }
         let (Some(before), Some(t_bounce)) = (track.ekf.last_contact, track.bounce_t) else { return };
-        if let Some(after) = session::velocity_at(&track.after, t_bounce, self.cfg.learn.min_samples) {
-            self.session.take_bounce(&before, &after, self.prop.bounce.radius, &self.cfg.learn);
+        let (cfg, sigma) = (self.cfg.learn, self.cfg.noise.measurement);
+        if let Some((after, after_var)) = session::velocity_at(&track.after, t_bounce, cfg.min_samples, sigma) {
+            // Against the table this ball flew with, before it learns from it.
+            let residual = after - track.prop.bounce.apply(&before).vel;
+            let explained = track.ekf.contact_vel_var + Vec3::repeat(after_var);
+            self.session.take_bounce_residual(&residual, &explained, &cfg);
+            self.session.take_bounce(&before, &after, self.prop.bounce.radius, &cfg);
         }
     }
 
@@ -441,7 +447,11 @@ impl Estimator {
         let t_first = inliers[0].t;
         let state = crate::physics::BallState::new(cubic.pos(t_first), cubic.vel(t_first), spin);
         let sigma = self.cfg.noise.measurement;
-        let mut ekf = Ekf::new(t_first, &state, 2.0 * sigma, 0.6, self.cfg.initial_spin_std, self.cfg.noise);
+        let mut noise = self.cfg.noise;
+        if self.cfg.learn.enabled {
+            noise.bounce_vel = self.session.bounce_noise();
+        }
+        let mut ekf = Ekf::new(t_first, &state, 2.0 * sigma, 0.6, self.cfg.initial_spin_std, noise);
         let along = first * first.transpose();
         let spin_cov = (nalgebra::Matrix3::identity() - along) * self.cfg.initial_spin_std.powi(2)
             + along * self.cfg.spin_prior_along_velocity.powi(2);

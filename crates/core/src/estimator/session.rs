@@ -1,7 +1,10 @@
 //! What the estimator learns across a session (issue 15): the things that
 //! do not change from one ball to the next — the table's restitution e and
-//! friction μ, read from the bounces it sees, and the air's drag, read from
-//! each flight's deceleration. Bounded (each value stays inside a plausible
+//! friction μ, read from the bounces it sees, the air's drag, read from
+//! each flight's deceleration, and how much of the velocity after a bounce
+//! the table model leaves unexplained (the filter's bounce noise, per axis:
+//! the mean square of each bounce's residual less what the state's
+//! uncertainty before it and the measurement after it explain). Bounded (each value stays inside a plausible
 //! range), robust to a bad ball (one ball moves a value by at most a fixed
 //! step), with a fixed memory, and reset with the estimator (a restart or a
 //! new configuration).
@@ -9,7 +12,7 @@
 //! The measurements are bounded in work: the session's drag once per ball
 //! when it bounces (what the ball's batches read, `super::smooth`; where
 //! none has, one cubic over the window, [`drag_from_flight`], which reads
-//! 2–5 % low), the table when its track ends; a ball's own drag (weighed
+//! 2–5 % low), the table and the bounce noise when its track ends; a ball's own drag (weighed
 //! against the session's for the rest of its flight,
 //! [`LearnConfig::ball_drag_weight`]) every [`LearnConfig::ball_drag_every`]
 //! samples before its bounce, until a batch has read it.
@@ -99,15 +102,38 @@ pub struct Session {
     pub restitution: Learned,
     /// Ball–table friction μ (bounded 0.05–0.6).
     pub friction: Learned,
+    /// What the table model leaves unexplained of the velocity just after
+    /// a bounce, per axis, (m/s)² (the filter's
+    /// [`super::ekf::EkfNoise::bounce_vel`]; bounded 0.002–0.5).
+    pub bounce_vel: [Learned; 3],
 }
 
 impl Session {
-    /// A session that starts from the calibration's table.
-    pub fn new(bounce: &BounceModel) -> Self {
+    /// A session that starts from the calibration's table and the
+    /// filter's bounce noise (per axis, (m/s)²).
+    pub fn new(bounce: &BounceModel, bounce_vel_start: &Vec3) -> Self {
         Session {
             drag: Learned::new(1.0, (0.6, 1.8), 0.3),
             restitution: Learned::new(bounce.restitution, (0.7, 0.99), 0.08),
             friction: Learned::new(bounce.friction, (0.05, 0.6), 0.1),
+            bounce_vel: [0, 1, 2].map(|k| Learned::new(bounce_vel_start[k], (0.002, 0.5), 0.1)),
+        }
+    }
+
+    /// The extra velocity variance at a bounce learned so far, per axis.
+    pub fn bounce_noise(&self) -> Vec3 {
+        Vec3::new(self.bounce_vel[0].value, self.bounce_vel[1].value, self.bounce_vel[2].value)
+    }
+
+    /// Takes one ball's bounce residual: `residual` the velocity seen just
+    /// after it less the one its table predicted, `explained` the variance
+    /// per axis that the state's uncertainty before it and the measurement
+    /// of the velocity after it account for. What is left is the table
+    /// model's own (innovation-based noise estimation: the mean of r² less
+    /// its explained part).
+    pub(crate) fn take_bounce_residual(&mut self, residual: &Vec3, explained: &Vec3, cfg: &LearnConfig) {
+        for k in 0..3 {
+            self.bounce_vel[k].take(residual[k] * residual[k] - explained[k], cfg.memory);
         }
     }
 
@@ -158,12 +184,15 @@ pub(crate) fn drag_from_flight(samples: &[Sample], flight: &FlightModel, min_sam
     (xx > 0.0).then(|| xy / xx).filter(|s| s.is_finite() && *s > 0.0)
 }
 
-/// The velocity at `t` of a cubic through `samples` (after a bounce).
-pub(crate) fn velocity_at(samples: &[Sample], t: f64, min_samples: usize) -> Option<Vec3> {
+/// The velocity at `t` of a cubic through `samples` (after a bounce), and
+/// its variance per axis for samples with per-axis noise `sigma`.
+pub(crate) fn velocity_at(samples: &[Sample], t: f64, min_samples: usize, sigma: f64) -> Option<(Vec3, f64)> {
     if samples.len() < min_samples {
         return None;
     }
-    Cubic::fit(samples.iter()).map(|c| c.vel(t))
+    let cubic = Cubic::fit(samples.iter())?;
+    let spread = cubic.vel_spread(samples.iter(), t)?;
+    Some((cubic.vel(t), sigma * sigma * spread))
 }
 
 /// e and (where the contact slid) μ of one bounce, inverting the bounce
@@ -226,7 +255,7 @@ mod tests {
 
     #[test]
     fn a_ball_flies_with_its_own_drag_weighed_against_the_sessions() {
-        let mut s = Session::new(&BounceModel::new(0.95, 0.14, 0.02));
+        let mut s = Session::new(&BounceModel::new(0.95, 0.14, 0.02), &Vec3::repeat(0.05));
         s.drag.value = 1.1;
         let cfg = LearnConfig { ball_drag_weight: 0.5, ..LearnConfig::default() };
         assert!((cfg.ball_drag(&s.drag, Some(1.3)) - 1.2).abs() < 1e-12);
@@ -240,7 +269,7 @@ mod tests {
     #[test]
     fn learning_is_bounded_and_a_bad_ball_moves_it_little() {
         let cfg = LearnConfig::default();
-        let mut s = Session::new(&BounceModel::new(0.95, 0.14, 0.02));
+        let mut s = Session::new(&BounceModel::new(0.95, 0.14, 0.02), &Vec3::repeat(0.05));
         let before = BallState::new(Vec3::zeros(), Vec3::new(5.0, 0.0, -3.0), Vec3::new(0.0, -150.0, 0.0));
         let after = BounceModel::new(0.88, 0.3, 0.02).apply(&before).vel;
         for _ in 0..40 {
@@ -260,5 +289,25 @@ mod tests {
             s.take_drag(50.0, &cfg);
         }
         assert_eq!(s.drag.value, 1.8);
+    }
+
+    /// The bounce noise is the mean of the residual's square less what
+    /// the state and the measurement explain, per axis, within its bounds.
+    #[test]
+    fn the_bounce_noise_is_what_the_residuals_leave_unexplained() {
+        let cfg = LearnConfig::default();
+        let mut s = Session::new(&BounceModel::new(0.95, 0.14, 0.02), &Vec3::repeat(0.05));
+        let explained = Vec3::new(0.01, 0.01, 0.01);
+        // Residuals of ±0.3 m/s sideways, 0.1 along the flight, none up.
+        for k in 0..200 {
+            let sign = if k % 2 == 0 { 1.0 } else { -1.0 };
+            s.take_bounce_residual(&Vec3::new(0.1 * sign, 0.3 * sign, 0.0), &explained, &cfg);
+        }
+        let n = s.bounce_noise();
+        // 0.01 − 0.01: nothing left, at the bound.
+        assert_eq!(n.x, 0.002, "{n:?}");
+        assert!((n.y - (0.09 - 0.01)).abs() < 1e-3, "{n:?}");
+        assert_eq!(n.z, 0.002, "bounded below");
+        assert_eq!(s.bounce_vel[1].count, 200);
     }
 }

@@ -52,6 +52,22 @@ impl Cubic {
         cubic.coef.iter().all(|c| c.iter().all(|v| v.is_finite())).then_some(cubic)
     }
 
+    /// How far P′(t) scatters with the samples' noise: its variance per
+    /// unit variance of one sample's coordinate, for the fit of `samples`
+    /// (the ones it was fitted to), b′ᵀ(AᵀA)⁻¹b′ with b′ the basis's
+    /// derivative at `t`. `None` where the system is singular.
+    pub fn vel_spread<'a>(&self, samples: impl Iterator<Item = &'a Sample>, t: f64) -> Option<f64> {
+        let mut a = Matrix4::<f64>::zeros();
+        for s in samples {
+            let tau = self.tau(s.t);
+            let phi = Vector4::new(1.0, tau, tau * tau, tau * tau * tau);
+            a += phi * phi.transpose();
+        }
+        let x = self.tau(t);
+        let db = Vector4::new(0.0, 1.0, 2.0 * x, 3.0 * x * x) / self.half_span;
+        Some(db.dot(&a.cholesky()?.solve(&db)))
+    }
+
     fn tau(&self, t: f64) -> f64 {
         (t - self.t_mid) / self.half_span
     }

@@ -136,6 +136,7 @@ pub(crate) fn run_estimator(
         restitution: s.restitution.value,
         friction: s.friction.value,
         bounces: s.restitution.count,
+        bounce_vel: s.bounce_noise().into(),
     };
     (plans, learned)
 }
@@ -151,6 +152,9 @@ pub struct SessionLearned {
     pub friction: f64,
     /// Bounces it learned the table from.
     pub bounces: u32,
+    /// Variance of the velocity just after a bounce that the table model
+    /// leaves unexplained, per axis, (m/s)² (the filter's bounce noise).
+    pub bounce_vel: [f64; 3],
 }
 
 fn v3(a: [f64; 3]) -> Vec3 {
@@ -291,12 +295,14 @@ fn world_session(cal: &Calibration, setup: &StreamSetup) -> WorldSession {
             restitution: w.physics.restitution,
             friction: w.physics.friction,
             bounces: 0,
+            bounce_vel: [f64::NAN; 3],
         },
         None => SessionLearned {
             drag_scale: 1.0,
             restitution: cal.physics.restitution,
             friction: cal.physics.friction,
             bounces: 0,
+            bounce_vel: [f64::NAN; 3],
         },
     };
     WorldSession {
