@@ -702,10 +702,10 @@ fn start_batch(track: &mut Track, prop: &Propagator, session: &Session, cfg: &Es
 /// Advances the track's batch ([`smooth::Batch`]) by a bounded share, and
 /// when it is done hands what it found to the filter: the spin it read
 /// (constant in flight) with the uncertainty the window leaves it, and the
-/// drag for the rest of the flight. The
-/// filter keeps its position and velocity, which its latest samples set:
-/// the batch's, flown on from its window's end, would be millimetres off
-/// them, and the gate would take the next samples for another ball.
+/// drag for the rest of the flight. The filter keeps its position and
+/// velocity, which its latest samples set: the batch's, flown on from its
+/// window's end, would be millimetres off them, and the gate would take
+/// the next samples for another ball.
 fn advance_batch(track: &mut Track, samples: usize) {
     let Some(batch) = &mut track.batch else { return };
     let smooth::Progress::Done(found) = batch.advance(&track.window, samples) else { return };

@@ -4,18 +4,19 @@
 //! each flight's deceleration, and how much of the velocity after a bounce
 //! the table model leaves unexplained (the filter's bounce noise, per axis:
 //! the mean square of each bounce's residual less what the state's
-//! uncertainty before it and the measurement after it explain). Bounded (each value stays inside a plausible
-//! range), robust to a bad ball (one ball moves a value by at most a fixed
-//! step), with a fixed memory, and reset with the estimator (a restart or a
-//! new configuration).
+//! uncertainty before it and the measurement after it explain). Bounded
+//! (each value stays inside a plausible range), robust to a bad ball (one
+//! ball moves a value by at most a fixed step), with a fixed memory, and
+//! reset with the estimator (a restart or a new configuration).
 //!
 //! The measurements are bounded in work: the session's drag once per ball
 //! when it bounces (what the ball's batches read, `super::smooth`; where
 //! none has, one cubic over the window, [`drag_from_flight`], which reads
-//! 2–5 % low), the table and the bounce noise when its track ends; a ball's own drag (weighed
-//! against the session's for the rest of its flight,
-//! [`LearnConfig::ball_drag_weight`]) every [`LearnConfig::ball_drag_every`]
-//! samples before its bounce, until a batch has read it.
+//! 2–5 % low), the table and the bounce noise when its track ends; a
+//! ball's own drag (weighed against the session's for the rest of its
+//! flight, [`LearnConfig::ball_drag_weight`]) every
+//! [`LearnConfig::ball_drag_every`] samples before its bounce, until a
+//! batch has read it.
 
 use crate::fit::Sample;
 use crate::fit::poly::Cubic;
