@@ -178,8 +178,9 @@ pub struct TrackerConfig {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct EstimatorSection {
-    /// Learn the air's drag and the table's e and μ from the balls of the
-    /// session (false: every ball flies with the calibration, as before).
+    /// Learn the air's drag, the table's e and μ and the filter's bounce
+    /// noise from the balls of the session (false: every ball flies with
+    /// the calibration, as before).
     pub learn_session: bool,
     /// Weight of a ball's own drag, read from its flight, against the
     /// session's for the rest of that flight, 0..=1.

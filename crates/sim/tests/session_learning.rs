@@ -7,7 +7,7 @@
 
 use topspin_core::calib::Calibration;
 use topspin_core::estimator::session::LearnConfig;
-use topspin_core::estimator::{Estimator, EstimatorConfig};
+use topspin_core::estimator::{Estimator, EstimatorConfig, EstimatorEvent};
 use topspin_core::plan::StrikePlan;
 use topspin_core::time::Instant;
 use topspin_sim::worlds::{World, simulate_world_ball, world_named};
@@ -142,6 +142,47 @@ fn the_bounce_noise_is_learned_where_the_model_misses() {
     // of that or less from a launcher; both moved off the start.
     assert!(skewed.y > 0.03 && launcher.y < 0.25 * skewed.y, "skewed {skewed:?}, launcher {launcher:?}");
     assert!(launcher.y < start.y && launcher.z < start.z, "launcher {launcher:?} from {start:?}");
+}
+
+/// Each bounce the session learns from is announced with what it holds
+/// after it (the daemon logs these); learning off announces nothing.
+#[test]
+fn what_the_session_learns_is_announced() {
+    let cal = Calibration::default_cell();
+    let world = world_named(&cal, "other-table").unwrap();
+    let (balls, launches) = session(&world, &cal, 12);
+    let announced = |learn: LearnConfig| {
+        let mut est = Estimator::new(&cal, config(learn));
+        let mut learned = Vec::new();
+        for (b, &t0) in balls.iter().zip(&launches) {
+            for o in &b.observations {
+                let out = est.observe(Instant::from_secs_f64(t0 + o.t), o.pos);
+                learned.extend(out.events.iter().filter(|e| matches!(e, EstimatorEvent::Learned { .. })).copied());
+            }
+        }
+        // Silence ends the last track (and takes its bounce).
+        let mut out = Default::default();
+        est.poll(Instant::from_secs_f64(launches.last().unwrap() + 5.0), &mut out);
+        learned.extend(out.events.iter().filter(|e| matches!(e, EstimatorEvent::Learned { .. })).copied());
+        (learned, *est.session())
+    };
+    let (learned, s) = announced(LearnConfig::default());
+    assert_eq!(learned.len() as u32, s.bounce_vel[0].count, "one per bounce taken");
+    assert!(learned.len() >= 8, "{} of {} balls", learned.len(), balls.len());
+    let Some(EstimatorEvent::Learned { drag, restitution, friction, bounce_sigma, .. }) = learned.last().copied()
+    else {
+        unreachable!()
+    };
+    assert_eq!(
+        (drag, restitution, friction, bounce_sigma),
+        (
+            s.drag.value as f32,
+            s.restitution.value as f32,
+            s.friction.value as f32,
+            s.bounce_noise().map(|v| v.sqrt() as f32).into()
+        )
+    );
+    assert!(announced(LearnConfig::OFF).0.is_empty());
 }
 
 #[test]

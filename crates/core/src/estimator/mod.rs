@@ -196,6 +196,21 @@ pub enum EstimatorEvent {
         /// Squared Mahalanobis distance of the logo spin.
         d2: f64,
     },
+    /// The session learned from an ended track's bounce (learning on):
+    /// what it holds now, for the next balls.
+    Learned {
+        /// Id of the track it learned from.
+        trajectory: u32,
+        /// Multiplier of the calibrated drag.
+        drag: f32,
+        /// Table restitution e.
+        restitution: f32,
+        /// Ball–table friction μ.
+        friction: f32,
+        /// σ of the velocity just after a bounce that the table leaves
+        /// unexplained, per axis (x, y, z), m/s.
+        bounce_sigma: [f32; 3],
+    },
 }
 
 /// A spin measured from the ball's logo (the logo thread's result).
@@ -329,8 +344,9 @@ impl Estimator {
     }
 
     /// Ends the track (if any) and learns the table from its bounce, and
-    /// how much of the velocity after it the table left unexplained.
-    fn end_track(&mut self) {
+    /// how much of the velocity after it the table left unexplained
+    /// ([`EstimatorEvent::Learned`] where it did).
+    fn end_track(&mut self, out: &mut StepOutput) {
         let Some(track) = self.track.take() else { return };
         if !self.cfg.learn.enabled || track.ekf.bounces != 1 {
             return;
@@ -343,6 +359,14 @@ impl Estimator {
             let explained = track.ekf.contact_vel_var + Vec3::repeat(after_var);
             self.session.take_bounce_residual(&residual, &explained, &cfg);
             self.session.take_bounce(&before, &after, self.prop.bounce.radius, &cfg);
+            let s = &self.session;
+            out.push(EstimatorEvent::Learned {
+                trajectory: track.id,
+                drag: s.drag.value as f32,
+                restitution: s.restitution.value as f32,
+                friction: s.friction.value as f32,
+                bounce_sigma: s.bounce_noise().map(|v| v.sqrt() as f32).into(),
+            });
         }
     }
 
@@ -363,7 +387,7 @@ impl Estimator {
             && t - track.last_t > self.cfg.silence
         {
             out.push(EstimatorEvent::Ended { trajectory: track.id, t, reason: EndReason::Silence });
-            self.end_track();
+            self.end_track(out);
         }
         if let Some(last) = self.candidate.last()
             && t - last.t > self.cfg.silence
@@ -559,8 +583,8 @@ impl Estimator {
                 if track.rejects.push(sample).is_err() || track.rejects.is_full() {
                     let id = track.id;
                     let rejected = track.rejects.clone();
-                    self.end_track();
                     out.push(EstimatorEvent::Ended { trajectory: id, t: sample.t, reason: EndReason::Lost });
+                    self.end_track(out);
                     self.candidate.clear();
                     for s in &rejected {
                         let _ = self.candidate.push(*s);
@@ -572,7 +596,7 @@ impl Estimator {
         if let Some(reason) = self.ended(sample.t) {
             let id = self.track.as_ref().map_or(0, |t| t.id);
             out.push(EstimatorEvent::Ended { trajectory: id, t: sample.t, reason });
-            self.end_track();
+            self.end_track(out);
             return;
         }
         self.plan(sample.t, out);
