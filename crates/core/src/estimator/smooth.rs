@@ -34,7 +34,7 @@
 
 use std::ops::{AddAssign, SubAssign};
 
-use nalgebra::{Matrix3, SMatrix, SVector};
+use nalgebra::{Cholesky, Const, Matrix3, SMatrix, SVector};
 
 use super::ekf::COV_STEP;
 use crate::fit::Sample;
@@ -123,8 +123,9 @@ struct Finished {
     cost: f64,
     step: Option<VN>,
     last: BallState,
-    /// The normal equations with the priors (the inverse covariance).
-    h: MN,
+    /// The normal equations with the priors (the inverse covariance),
+    /// factored: the step's and the covariance's.
+    chol: Option<Cholesky<f64, Const<N>>>,
 }
 
 impl Pass {
@@ -168,8 +169,9 @@ impl Pass {
         if !(cost.is_finite() && self.s.is_finite()) {
             return None;
         }
-        let step = self.h.cholesky().map(|c| c.solve(&self.g)).filter(|d| d.iter().all(|v| v.is_finite()));
-        Some(Finished { x, cost, step, last: self.s, h: self.h })
+        let chol = self.h.cholesky();
+        let step = chol.as_ref().map(|c| c.solve(&self.g)).filter(|d| d.iter().all(|v| v.is_finite()));
+        Some(Finished { x, cost, step, last: self.s, chol })
     }
 }
 
@@ -306,7 +308,7 @@ impl Batch {
         // and the filter keeps its own.
         let state = BallState { spin: Vec3::new(x[6], x[7], x[8]), ..best.last };
         // The spin's rows of H⁻¹: three solves, not the whole inverse.
-        let spin_cov = best.h.cholesky().map(|c| {
+        let spin_cov = best.chol.as_ref().map(|c| {
             let unit = SMatrix::<f64, N, 3>::from_fn(|i, j| if i == 6 + j { 1.0 } else { 0.0 });
             c.solve(&unit).fixed_rows::<3>(6).into_owned()
         });
