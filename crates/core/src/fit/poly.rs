@@ -15,6 +15,11 @@ pub struct Cubic {
     coef: [Vec3; 4],
 }
 
+/// The basis (1, τ, τ², τ³) at τ.
+fn basis(tau: f64) -> Vector4<f64> {
+    Vector4::new(1.0, tau, tau * tau, tau * tau * tau)
+}
+
 impl Cubic {
     /// Fits the samples; `None` with fewer than four distinct times or a
     /// singular system.
@@ -33,8 +38,7 @@ impl Cubic {
         let mut a = Matrix4::<f64>::zeros();
         let mut b = [Vector4::<f64>::zeros(); 3];
         for s in samples {
-            let tau = (s.t - t_mid) / half_span;
-            let phi = Vector4::new(1.0, tau, tau * tau, tau * tau * tau);
+            let phi = basis((s.t - t_mid) / half_span);
             a += phi * phi.transpose();
             for (axis, b_axis) in b.iter_mut().enumerate() {
                 *b_axis += phi * s.pos[axis];
@@ -59,8 +63,7 @@ impl Cubic {
     pub fn vel_spread<'a>(&self, samples: impl Iterator<Item = &'a Sample>, t: f64) -> Option<f64> {
         let mut a = Matrix4::<f64>::zeros();
         for s in samples {
-            let tau = self.tau(s.t);
-            let phi = Vector4::new(1.0, tau, tau * tau, tau * tau * tau);
+            let phi = basis(self.tau(s.t));
             a += phi * phi.transpose();
         }
         let x = self.tau(t);
