@@ -94,6 +94,9 @@ pub struct EvalStreamArgs {
     /// Share of frames lost.
     #[arg(long, default_value_t = 0.05)]
     pub dropout: f64,
+    /// The tracker's frame rate, Hz (the paper's tracker: 150).
+    #[arg(long, default_value_t = 150.0)]
+    pub rate_hz: f64,
     /// Fly the balls in a world of `topspin eval worlds` (linear-weak,
     /// linear-strong, saturating, crisis, heavy-air, other-table) instead of
     /// the calibration's own.
@@ -260,6 +263,9 @@ fn run_stream(a: EvalStreamArgs) -> anyhow::Result<()> {
     if a.set.balls == 0 {
         return Err(BadInput("--balls 0: a stream needs at least one ball".to_owned()).into());
     }
+    if !(30.0..=2000.0).contains(&a.rate_hz) {
+        return Err(BadInput(format!("--rate-hz {} must be in [30, 2000]", a.rate_hz)).into());
+    }
     let world = match &a.world {
         Some(name) => Some(
             topspin_sim::worlds::world_named(&cal, name)
@@ -273,6 +279,7 @@ fn run_stream(a: EvalStreamArgs) -> anyhow::Result<()> {
         seed: a.set.seed,
         noise_mm: a.noise_mm,
         dropout: a.dropout,
+        rate_hz: a.rate_hz,
         world,
         learn: !a.no_learning,
         launcher: a.launcher,
@@ -289,11 +296,12 @@ fn run_stream(a: EvalStreamArgs) -> anyhow::Result<()> {
     }
     println!(
         "Streaming estimator, {} balls back to back ({} with the true hit inside the hitting window, {} of \
-         them tracked), {} mm noise, {:.0}% dropouts, two false starts on every {}th ball; medians (p90 in \
-         brackets):\n",
+         them tracked), {} Hz, {} mm noise, {:.0}% dropouts, two false starts on every {}th ball; medians \
+         (p90 in brackets):\n",
         report.balls,
         report.reachable,
         report.tracked,
+        setup.rate_hz,
         setup.noise_mm,
         setup.dropout * 100.0,
         setup.outliers_every

@@ -26,6 +26,7 @@ use crate::calib::AimMode;
 use crate::calib::Calibration;
 use crate::fit::outlier::{START_WINDOW, StartFilter};
 use crate::fit::poly::Cubic;
+use crate::fit::refine::SPIN_PRIOR_STD;
 use crate::fit::{Prediction, Sample, magnus, predict};
 use crate::motion::MotionLimits;
 use crate::motion::reach::ReachMap;
@@ -717,7 +718,12 @@ fn ball_flight(
 /// reading (the drag's prior).
 fn start_batch(track: &mut Track, prop: &Propagator, session: &Session, cfg: &EstimatorConfig, drag_std: f64) {
     let flight = ball_flight(prop, session, cfg, &track.window);
-    let priors = smooth::Priors { sigma: cfg.noise.measurement, along_std: cfg.spin_prior_along_velocity, drag_std };
+    let priors = smooth::Priors {
+        sigma: cfg.noise.measurement,
+        along_std: cfg.spin_prior_along_velocity,
+        spin_std: SPIN_PRIOR_STD,
+        drag_std,
+    };
     let prop = Propagator { flight, ..track.prop };
     track.batch = smooth::Batch::start(&prop, &track.window, &track.ekf.state(), &priors);
     track.batch_from = track.window.len();

@@ -74,6 +74,12 @@ pub struct RefineConfig {
     pub fix_spin: bool,
 }
 
+/// The weak isotropic prior on the spin, rad/s (σ about zero): real balls
+/// reach 100–175 rps (DESIGN §3), so 800 rad/s (127 rps) is weak; it
+/// matters only where the lift saturates and a flight no longer tells the
+/// spin's size. Shared with the estimator's pre-bounce batches.
+pub const SPIN_PRIOR_STD: f64 = 800.0;
+
 impl Default for RefineConfig {
     fn default() -> Self {
         RefineConfig {
@@ -81,7 +87,7 @@ impl Default for RefineConfig {
             huber_k: 2.5,
             reject_sigma: 6.0,
             prior_along_velocity: 15.0,
-            prior_spin: 800.0,
+            prior_spin: SPIN_PRIOR_STD,
             variation: FlightVariation::default(),
             max_iterations: 30,
             fix_spin: false,
