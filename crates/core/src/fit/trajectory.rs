@@ -11,12 +11,23 @@ use super::outlier::StartFilter;
 use super::poly::Cubic;
 use super::predict::{Prediction, predict};
 use super::refine::{RefineConfig, refine};
-use crate::physics::{BallState, FlightScales, Propagator, Vec3};
+use crate::physics::{BallState, Event, FlightScales, Propagator, StopAt, Vec3};
 
 /// The fewest samples a flight needs for a fit.
 pub const MIN_SAMPLES: usize = 8;
-/// The fewest samples after an observed bounce that are fitted on their own.
+/// The fewest samples after an observed bounce that are fitted on their own …
 pub(crate) const MIN_POST_BOUNCE: usize = 6;
+/// … and the shortest time they must span, s (six samples at 150 Hz span
+/// 33 ms): the
+/// velocity after the bounce is read from a stretch of flight, not from a
+/// count of samples (at 380 Hz six samples span 16 ms, and their velocity
+/// was worse than the prediction through the bounce).
+const MIN_POST_BOUNCE_SPAN: f64 = 0.033;
+
+/// Whether the samples after a bounce are enough to be fitted on their own.
+fn enough_after_bounce(post: &[Sample]) -> bool {
+    post.len() >= MIN_POST_BOUNCE && post[post.len() - 1].t - post[0].t >= MIN_POST_BOUNCE_SPAN
+}
 
 /// Which spin fit.
 #[derive(Copy, Clone, Debug, PartialEq, Eq)]
@@ -137,17 +148,116 @@ fn validate(samples: &[Sample]) -> Result<(), FitError> {
     Ok(())
 }
 
+/// Half-width, s, of the stretch around a table contact whose lowest
+/// sample it must be, and whose ends it must lie clearly below (at least
+/// two samples each side as well): two samples at 150 Hz. Counted in
+/// samples alone, a 380 Hz tracker's ±5 ms was too short for the ball to
+/// rise clearly out of its 2 mm noise, and most bounces went unseen.
+const BOUNCE_HALF_SPAN: f64 = 0.0135;
+
 /// The index of the lowest sample of the first observed table contact: a
 /// local minimum of z near the surface with the ball clearly falling into
 /// it and rising out of it.
 pub(crate) fn find_bounce(samples: &[Sample], radius: f64) -> Option<usize> {
     let z = |i: usize| samples[i].pos.z;
-    (2..samples.len().saturating_sub(2)).find(|&i| {
-        z(i) < radius + 0.04
-            && (i - 2..=i + 2).all(|k| z(k) >= z(i))
-            && z(i - 2) - z(i) > 0.004
-            && z(i + 2) - z(i) > 0.004
+    let n = samples.len();
+    (2..n.saturating_sub(2)).find(|&i| {
+        if z(i) >= radius + 0.04 {
+            return false;
+        }
+        let t = samples[i].t;
+        let (mut lo, mut hi) = (i - 2, i + 2);
+        while lo > 0 && t - samples[lo - 1].t <= BOUNCE_HALF_SPAN {
+            lo -= 1;
+        }
+        while hi + 1 < n && samples[hi + 1].t - t <= BOUNCE_HALF_SPAN {
+            hi += 1;
+        }
+        (lo..=hi).all(|k| z(k) >= z(i)) && z(lo) - z(i) > 0.004 && z(hi) - z(i) > 0.004
     })
+}
+
+/// The fit of the flight before the (first) bounce.
+struct BeforeBounce {
+    /// Time and state at the window's first sample, with the flight's own
+    /// drag and lift (`scales`): where its flight is flown from.
+    t_first: f64,
+    state_first: BallState,
+    /// Time and state at the window's last sample (leaning on the cubic
+    /// where the model fits clearly worse, [`data_weight`]).
+    t_end: f64,
+    state_end: BallState,
+    spin_std: Option<Vec3>,
+    weak_axis: Option<(Vec3, f64)>,
+    scales: Option<(FlightScales, FlightScales)>,
+    rms: f64,
+    /// Outliers of the model fit, as indices into the window.
+    rejects: Vec<usize>,
+}
+
+/// The paper's fit over `pre` (no bounce inside), refined by the flight
+/// model where `cfg` says so.
+fn fit_before_bounce(pre: &[Sample], prop: &Propagator, cfg: &FitConfig) -> Result<BeforeBounce, FitError> {
+    if pre.len() < MIN_SAMPLES {
+        return Err(FitError::TooFewSamples { n: pre.len(), min: MIN_SAMPLES });
+    }
+    let cubic = Cubic::fit(pre.iter()).ok_or(FitError::Degenerate)?;
+    let solve = magnus::solve(&cubic, pre.iter().map(|s| s.t), &prop.flight).ok_or(FitError::Degenerate)?;
+    let spin_paper = prop.flight.spin_from_linear(&solve.spin_linear, solve.mean_speed).unwrap_or(solve.spin_linear);
+    let (t_first, t_end) = (pre[0].t, pre[pre.len() - 1].t);
+    let paper_first = BallState::new(cubic.pos(t_first), cubic.vel(t_first), spin_paper);
+    Ok(match cfg.method {
+        Method::Paper => BeforeBounce {
+            t_first,
+            state_first: paper_first,
+            t_end,
+            state_end: BallState::new(cubic.pos(t_end), cubic.vel(t_end), spin_paper),
+            spin_std: None,
+            weak_axis: None,
+            scales: None,
+            rms: cubic_rms(&cubic, pre, &[]),
+            rejects: Vec::new(),
+        },
+        Method::Refined => {
+            let r = refine(pre, &paper_first, FlightScales::ONE, prop, &cfg.refine);
+            let mut s = r.state;
+            let mut t_now = r.t0;
+            advance_flight(&prop.with_scales(r.scales), &mut s, &mut t_now, t_end);
+            // Never worse than the data: where the model fits the window
+            // clearly worse than the cubic does, the world is not the model,
+            // and the state the prediction starts from leans on the cubic.
+            let w = data_weight(r.rms, cubic_rms(&cubic, pre, &r.outliers));
+            s.pos = s.pos * (1.0 - w) + cubic.pos(t_end) * w;
+            s.vel = s.vel * (1.0 - w) + cubic.vel(t_end) * w;
+            BeforeBounce {
+                t_first: r.t0,
+                state_first: r.state,
+                t_end,
+                state_end: s,
+                spin_std: Some(r.spin_std),
+                weak_axis: Some((r.weak_axis, r.weak_axis_std)),
+                scales: Some((r.scales, r.scales_std)),
+                rms: r.rms,
+                rejects: r.outliers,
+            }
+        }
+    })
+}
+
+impl BeforeBounce {
+    /// The propagator with this flight's drag and lift.
+    fn prop(&self, prop: &Propagator) -> Propagator {
+        prop.with_scales(self.scales.map_or(FlightScales::ONE, |(s, _)| s))
+    }
+
+    /// When the fitted flight meets the table before `t`, if it does.
+    fn contact_before(&self, prop: &Propagator, t: f64) -> Option<f64> {
+        let (mut s, mut now) = (self.state_first, self.t_first);
+        match self.prop(prop).advance(&mut s, &mut now, &StopAt::time(t)) {
+            Event::Bounce { t: tc, .. } if tc < t => Some(tc),
+            _ => None,
+        }
+    }
 }
 
 /// Fits one flight; `samples` in time order on any clock.
@@ -157,51 +267,40 @@ pub fn fit_trajectory(samples: &[Sample], prop: &Propagator, cfg: &FitConfig) ->
     let inliers: Vec<usize> = (0..samples.len()).filter(|i| !rejected.contains(i)).collect();
     let clean: Vec<Sample> = inliers.iter().map(|&i| samples[i]).collect();
     let bounce_at = find_bounce(&clean, prop.flight.radius());
-    let (pre, post) = match bounce_at {
-        Some(b) => (&clean[..b], &clean[b + 1..]),
-        None => (&clean[..], &clean[..0]),
+    // The window before the bounce ends at `pre_len`; the one after it
+    // starts at `post_from` (the contact's own sample belongs to neither).
+    let (mut pre_len, mut post_from) = match bounce_at {
+        Some(b) => (b, b + 1),
+        None => (clean.len(), clean.len()),
     };
-    if pre.len() < MIN_SAMPLES {
-        return Err(FitError::TooFewSamples { n: pre.len(), min: MIN_SAMPLES });
+    let mut before = fit_before_bounce(&clean[..pre_len], prop, cfg)?;
+    if bounce_at.is_none()
+        && before.state_end.pos.z < prop.flight.radius()
+        && let Some(tc) = before.contact_before(prop, before.t_end)
+    {
+        // A contact the samples cannot show yet (too near the window's
+        // end) or did not (their noise): the fitted flight has gone
+        // through the table by the last sample, and would be predicted on
+        // from under it. The samples after its contact are not this
+        // flight's.
+        let cut = clean.partition_point(|s| s.t < tc);
+        if cut >= MIN_SAMPLES {
+            (pre_len, post_from) = (cut, cut);
+            before = fit_before_bounce(&clean[..pre_len], prop, cfg)?;
+        }
     }
-
-    // The paper's fit on the pre-bounce window.
-    let cubic = Cubic::fit(pre.iter()).ok_or(FitError::Degenerate)?;
-    let solve = magnus::solve(&cubic, pre.iter().map(|s| s.t), &prop.flight).ok_or(FitError::Degenerate)?;
-    let spin_paper = prop.flight.spin_from_linear(&solve.spin_linear, solve.mean_speed).unwrap_or(solve.spin_linear);
-
-    let mut fit_rejects: Vec<usize> = Vec::new();
-    let (t_pre_end, state_pre_end, spin_std, weak_axis, scales, mut rms) = match cfg.method {
-        Method::Paper => {
-            let t = pre[pre.len() - 1].t;
-            let s = BallState::new(cubic.pos(t), cubic.vel(t), spin_paper);
-            (t, s, None, None, None, cubic_rms(&cubic, pre, &[]))
-        }
-        Method::Refined => {
-            let init = BallState::new(cubic.pos(pre[0].t), cubic.vel(pre[0].t), spin_paper);
-            let r = refine(pre, &init, FlightScales::ONE, prop, &cfg.refine);
-            fit_rejects.extend(r.outliers.iter().copied());
-            let t = pre[pre.len() - 1].t;
-            let mut s = r.state;
-            let mut t_now = r.t0;
-            advance_flight(&prop.with_scales(r.scales), &mut s, &mut t_now, t);
-            // Never worse than the data: where the model fits the window
-            // clearly worse than the cubic does, the world is not the model,
-            // and the state the prediction starts from leans on the cubic.
-            let w = data_weight(r.rms, cubic_rms(&cubic, pre, &r.outliers));
-            s.pos = s.pos * (1.0 - w) + cubic.pos(t) * w;
-            s.vel = s.vel * (1.0 - w) + cubic.vel(t) * w;
-            (t, s, Some(r.spin_std), Some((r.weak_axis, r.weak_axis_std)), Some((r.scales, r.scales_std)), r.rms)
-        }
-    };
+    let (pre, post) = (&clean[..pre_len], &clean[post_from..]);
+    let mut fit_rejects = before.rejects.clone();
+    let mut rms = before.rms;
     // The rest flies with this flight's drag and lift.
-    let prop = &prop.with_scales(scales.map_or(FlightScales::ONE, |(s, _)| s));
-    let spin = state_pre_end.spin;
+    let prop = &before.prop(prop);
+    let spin = before.state_end.spin;
 
-    // Past an observed bounce: the spin after it from the bounce model, the
-    // state from the post-bounce samples.
-    let (t_last, state_last) = if post.len() >= MIN_POST_BOUNCE {
-        let p = predict(prop, &state_pre_end, t_pre_end, f64::INFINITY);
+    // Past the bounce: the spin after it from the bounce model, the state
+    // from the post-bounce samples.
+    let fit_after = enough_after_bounce(post);
+    let (t_last, state_last) = if fit_after {
+        let p = predict(prop, &before.state_end, before.t_end, f64::INFINITY);
         let spin_after = p.bounce.map(|c| c.after.spin).unwrap_or(spin);
         let post_cubic = Cubic::fit(post.iter()).ok_or(FitError::Degenerate)?;
         let t = post[post.len() - 1].t;
@@ -210,8 +309,7 @@ pub fn fit_trajectory(samples: &[Sample], prop: &Propagator, cfg: &FitConfig) ->
             Method::Refined => {
                 let init = BallState::new(post_cubic.pos(post[0].t), post_cubic.vel(post[0].t), spin_after);
                 let r = refine(post, &init, FlightScales::ONE, prop, &RefineConfig { fix_spin: true, ..cfg.refine });
-                let offset = pre.len() + 1;
-                fit_rejects.extend(r.outliers.iter().map(|i| i + offset));
+                fit_rejects.extend(r.outliers.iter().map(|i| i + post_from));
                 rms = rms.max(r.rms);
                 let mut s = r.state;
                 let mut t_now = r.t0;
@@ -220,21 +318,21 @@ pub fn fit_trajectory(samples: &[Sample], prop: &Propagator, cfg: &FitConfig) ->
             }
         }
     } else {
-        (t_pre_end, state_pre_end)
+        (before.t_end, before.state_end)
     };
 
     // Map rejects in `clean` back to rows of `samples`.
     rejected.extend(fit_rejects.iter().map(|&i| inliers[i]));
     rejected.sort_unstable();
-    let used_post = if post.len() >= MIN_POST_BOUNCE { post.len() + 1 } else { 0 };
+    let used_post = if fit_after { clean.len() - pre.len() } else { 0 };
     let samples_used = pre.len() + used_post - fit_rejects.len();
     let prediction = predict(prop, &state_last, t_last, cfg.hit_plane_x);
     Ok(TrajectoryFit {
         method: cfg.method,
         spin,
-        spin_std,
-        weak_axis,
-        scales,
+        spin_std: before.spin_std,
+        weak_axis: before.weak_axis,
+        scales: before.scales,
         t_last,
         state_last,
         samples_used,
@@ -286,14 +384,21 @@ mod tests {
     /// A launcher-like flight observed at 150 Hz with noise, up to 5 mm
     /// before the hitting plane; returns the samples and the true pre-bounce spin.
     fn observed_flight(seed: u64, noise: f64, spin: Vec3) -> (Vec<Sample>, Propagator, f64) {
+        let (samples, prop, x_hit, _) = observed_at(seed, noise, spin, 150.0);
+        (samples, prop, x_hit)
+    }
+
+    /// The same at `rate_hz`, with the true time of the table contact.
+    fn observed_at(seed: u64, noise: f64, spin: Vec3, rate_hz: f64) -> (Vec<Sample>, Propagator, f64, f64) {
         let cal = Calibration::default_cell();
         let prop = cal.propagator();
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
         let n = Normal::new(0.0, noise).unwrap();
         let mut s = BallState::new(Vec3::new(-1.5, 0.1, 0.3), Vec3::new(7.0, -0.2, 0.9), spin);
         let mut t = 0.0;
+        let mut contact = f64::NAN;
         let mut out = Vec::new();
-        let dt = 1.0 / 150.0;
+        let dt = 1.0 / rate_hz;
         let stop = crate::physics::StopAt::time(0.0);
         loop {
             out.push(Sample::new(t, s.pos + Vec3::new(n.sample(&mut rng), n.sample(&mut rng), n.sample(&mut rng))));
@@ -301,13 +406,77 @@ mod tests {
             loop {
                 match prop.advance(&mut s, &mut t, &crate::physics::StopAt { t_max: target, ..stop }) {
                     Event::TimeLimit { .. } => break,
-                    Event::Bounce { .. } => continue,
-                    _ => return (out, prop, cal.strike.hit_plane_x),
+                    Event::Bounce { t: tb, .. } => {
+                        if contact.is_nan() {
+                            contact = tb;
+                        }
+                        continue;
+                    }
+                    _ => return (out, prop, cal.strike.hit_plane_x, contact),
                 }
             }
             // Stop 5 mm short of the plane, so that no noisy sample lies past it.
             if s.pos.x > cal.strike.hit_plane_x - 0.005 {
-                return (out, prop, cal.strike.hit_plane_x);
+                return (out, prop, cal.strike.hit_plane_x, contact);
+            }
+        }
+    }
+
+    /// Where the true flight from `s` crosses the hitting plane.
+    fn crossing(prop: &Propagator, mut s: BallState, x_hit: f64) -> Vec3 {
+        let mut t = 0.0;
+        let stop = crate::physics::StopAt { t_max: 5.0, hit_plane_x: Some(x_hit), net: false };
+        loop {
+            match prop.advance(&mut s, &mut t, &stop) {
+                Event::Bounce { .. } => continue,
+                Event::HitPlane { .. } => return s.pos,
+                e => panic!("{e:?} before the hitting plane"),
+            }
+        }
+    }
+
+    /// A fast tracker's bounce is seen: at 380 Hz two samples either side
+    /// span ±5 ms, over which the ball rises out of the table by about its
+    /// noise; the contact is found over ±13.5 ms instead.
+    #[test]
+    fn a_fast_trackers_bounce_is_seen() {
+        for seed in 0..12 {
+            let spin = Vec3::new(0.0, if seed % 2 == 0 { 350.0 } else { -250.0 }, 40.0);
+            let (samples, prop, x_hit, contact) = observed_at(seed, 0.002, spin, 380.0);
+            let fit = fit_trajectory(&samples, &prop, &FitConfig::new(Method::Refined, x_hit)).unwrap();
+            let seen = fit.observed_bounce.map(|i| samples[i].t);
+            assert!(seen.is_some_and(|t| (t - contact).abs() < 0.006), "seed {seed}: {seen:?} against {contact:.4}");
+        }
+    }
+
+    /// A window that ends one or two samples after the contact, before the
+    /// samples can show it: the fitted flight has gone through the table,
+    /// and the hit is predicted as from the window up to the contact, not
+    /// from under the table (400–850 mm off before this was handled).
+    #[test]
+    fn a_window_ending_just_past_the_bounce_predicts_from_before_it() {
+        for rate in [150.0, 380.0] {
+            for seed in 0..6 {
+                let spin = Vec3::new(0.0, 300.0, -30.0);
+                let (samples, prop, x_hit, contact) = observed_at(seed, 0.002, spin, rate);
+                let hit =
+                    crossing(&prop, BallState::new(Vec3::new(-1.5, 0.1, 0.3), Vec3::new(7.0, -0.2, 0.9), spin), x_hit);
+                let first_after = samples.iter().position(|s| s.t > contact).unwrap();
+                let hit_error = |end: usize| {
+                    let fit = fit_trajectory(&samples[..end], &prop, &FitConfig::new(Method::Refined, x_hit)).unwrap();
+                    (fit.prediction.hit.expect("a hit is predicted").state.pos - hit).norm()
+                };
+                // The window up to the contact: 14–34 mm off at 2 mm noise.
+                let before = hit_error(first_after);
+                for after in 1..=2 {
+                    let err = hit_error(first_after + after);
+                    assert!(
+                        err < before + 0.005,
+                        "{rate} Hz, seed {seed}, {after} after the contact: {:.0} mm off ({:.0} before it)",
+                        err * 1e3,
+                        before * 1e3
+                    );
+                }
             }
         }
     }
