@@ -19,7 +19,10 @@
 //! (`physics.flight_variation.drag`): a heavy ball's slowing is not taken
 //! for lift. The spin along the first velocity keeps the filter's prior
 //! ([`super::EstimatorConfig::spin_prior_along_velocity`]) in information
-//! form, so a flight that shows that component moves it. The filter takes
+//! form, so a flight that shows that component moves it; the spin's size
+//! keeps the refined fit's weak prior ([`crate::fit::refine::SPIN_PRIOR_STD`]),
+//! which a short window or a saturating lift would otherwise leave free.
+//! The filter takes
 //! the spin and its covariance from the window (the inverse of the normal
 //! equations with the priors, position, velocity and drag marginalised);
 //! its position and velocity and their covariance stay its own.
