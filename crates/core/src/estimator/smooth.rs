@@ -22,10 +22,10 @@
 //! form, so a flight that shows that component moves it; the spin's size
 //! keeps the refined fit's weak prior ([`crate::fit::refine::SPIN_PRIOR_STD`]),
 //! which a short window or a saturating lift would otherwise leave free.
-//! The filter takes
-//! the spin and its covariance from the window (the inverse of the normal
-//! equations with the priors, position, velocity and drag marginalised);
-//! its position and velocity and their covariance stay its own.
+//! The filter takes the spin and its covariance from the window (the
+//! inverse of the normal equations with the priors, position, velocity and
+//! drag marginalised); its position and velocity and their covariance stay
+//! its own.
 //!
 //! Bounded, allocation-free and spread out: a [`Batch`] reads at most
 //! [`super::WINDOW_CAP`] samples per pass and [`PASSES`] passes, and the
@@ -80,7 +80,7 @@ pub(crate) struct Priors {
     pub along_std: f64,
     /// σ of each spin component about zero, rad/s: weak, it bounds the
     /// spin's size where the window cannot (a saturating lift, a short
-    /// window: without it a 24-sample window at 380 Hz read 10⁵ rad/s).
+    /// window: without it 24-sample windows at 380 Hz read 10⁵–10⁷ rad/s).
     pub spin_std: f64,
     /// σ of ln(drag multiplier) about the flight it is given (0: the
     /// drag is held).

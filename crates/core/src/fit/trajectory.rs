@@ -18,10 +18,9 @@ pub const MIN_SAMPLES: usize = 8;
 /// The fewest samples after an observed bounce that are fitted on their own …
 pub(crate) const MIN_POST_BOUNCE: usize = 6;
 /// … and the shortest time they must span, s (six samples at 150 Hz span
-/// 33 ms): the
-/// velocity after the bounce is read from a stretch of flight, not from a
-/// count of samples (at 380 Hz six samples span 16 ms, and their velocity
-/// was worse than the prediction through the bounce).
+/// 33 ms): the velocity after the bounce is read from a stretch of flight,
+/// not from a count of samples (at 380 Hz six samples span 16 ms, and their
+/// velocity was worse than the prediction through the bounce).
 const MIN_POST_BOUNCE_SPAN: f64 = 0.033;
 
 /// Whether the samples after a bounce are enough to be fitted on their own.
@@ -290,7 +289,7 @@ pub fn fit_trajectory(samples: &[Sample], prop: &Propagator, cfg: &FitConfig) ->
         }
     }
     let (pre, post) = (&clean[..pre_len], &clean[post_from..]);
-    let mut fit_rejects = before.rejects.clone();
+    let mut fit_rejects = std::mem::take(&mut before.rejects);
     let mut rms = before.rms;
     // The rest flies with this flight's drag and lift.
     let prop = &before.prop(prop);
