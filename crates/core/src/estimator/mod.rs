@@ -563,8 +563,7 @@ impl Estimator {
                     }
                     if cfg.smooth {
                         if track.batch.is_none()
-                            && n >= smooth::FIRST
-                            && n >= track.batch_from + smooth::EVERY
+                            && smooth::due(&track.window, track.batch_from)
                             && !track.window.is_full()
                         {
                             start_batch(track, &self.prop, &self.session, &cfg, self.drag_variation);

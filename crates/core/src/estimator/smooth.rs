@@ -58,11 +58,34 @@ const CONVERGED_SPIN: f64 = 2.0;
 /// … and in the drag's logarithm ends the search, the step taken: so
 /// short a step is where the flight is linear in the unknowns.
 const CONVERGED_DRAG: f64 = 3e-3;
-/// The first batch reads a window of this many samples; the next one
-/// starts when the window has grown by [`EVERY`] since the last began.
+/// The first batch reads a window of [`FIRST`] samples, or of as much
+/// flight as that is at 150 Hz ([`FIRST_SPAN`]) where the tracker is
+/// slower; the next one starts when the window has grown by [`EVERY`]
+/// samples, or by [`EVERY_SPAN`] of flight. Never fewer than [`FIRST_MIN`]
+/// and [`EVERY_MIN`] samples.
 pub(crate) const FIRST: usize = 24;
+/// See [`FIRST`], s (24 samples at 150 Hz span 153 ms).
+const FIRST_SPAN: f64 = 0.15;
+/// See [`FIRST`].
+const FIRST_MIN: usize = 16;
 /// See [`FIRST`].
 pub(crate) const EVERY: usize = 8;
+/// See [`FIRST`], s (8 samples at 150 Hz: 53 ms).
+const EVERY_SPAN: f64 = 0.05;
+/// See [`FIRST`].
+const EVERY_MIN: usize = 4;
+
+/// Whether a batch is due over `window`, the last having begun when it
+/// held `from` samples (0: none yet). A slower tracker reads the spin after
+/// as much flight as one at 150 Hz; a faster one as often in samples.
+pub(crate) fn due(window: &[Sample], from: usize) -> bool {
+    let n = window.len();
+    if from == 0 {
+        n >= FIRST || (n >= FIRST_MIN && window[n - 1].t - window[0].t >= FIRST_SPAN)
+    } else {
+        n >= from + EVERY || (n >= from + EVERY_MIN && window[n - 1].t - window[from - 1].t >= EVERY_SPAN)
+    }
+}
 
 /// The unknowns: position, velocity and spin at the window's first
 /// sample, and the natural logarithm of this flight's drag multiplier.
@@ -578,5 +601,23 @@ mod tests {
         assert!(with < 1500.0, "the batch read {with:.0} rad/s");
         // Without it the same windows run off (1.5·10⁷ rad/s when written).
         assert!(without > 1e4, "{without:.0} rad/s without the prior: is this test still needed?");
+    }
+
+    /// When batches are due, on a virtual clock: at 150 Hz and faster by
+    /// count (24 samples, then every 8); a slower tracker after as much
+    /// flight (150 ms, then 50 ms), never under 16 and 4 samples.
+    #[test]
+    fn batches_come_after_as_much_flight_at_a_slower_tracker() {
+        let window = |rate: f64, n: usize| -> Vec<Sample> {
+            (0..n).map(|i| Sample { t: 2.0 + i as f64 / rate, pos: Vec3::zeros() }).collect()
+        };
+        let first = |rate: f64| (1..200).find(|&n| due(&window(rate, n), 0)).unwrap();
+        let next = |rate: f64, from: usize| (from + 1..200).find(|&n| due(&window(rate, n), from)).unwrap();
+        assert_eq!((first(150.0), next(150.0, 24)), (24, 32));
+        assert_eq!((first(380.0), next(380.0, 24)), (24, 32));
+        // 90 Hz: 16 samples span 167 ms, then 5 more 56 ms.
+        assert_eq!((first(90.0), next(90.0, 16)), (16, 21));
+        // 30 Hz: the floors hold.
+        assert_eq!((first(30.0), next(30.0, 16)), (16, 20));
     }
 }
