@@ -63,13 +63,13 @@ const CONVERGED_DRAG: f64 = 3e-3;
 /// slower; the next one starts when the window has grown by [`EVERY`]
 /// samples, or by [`EVERY_SPAN`] of flight. Never fewer than [`FIRST_MIN`]
 /// and [`EVERY_MIN`] samples.
-pub(crate) const FIRST: usize = 24;
+const FIRST: usize = 24;
 /// See [`FIRST`], s (24 samples at 150 Hz span 153 ms).
 const FIRST_SPAN: f64 = 0.15;
 /// See [`FIRST`].
 const FIRST_MIN: usize = 16;
 /// See [`FIRST`].
-pub(crate) const EVERY: usize = 8;
+const EVERY: usize = 8;
 /// See [`FIRST`], s (8 samples at 150 Hz: 53 ms).
 const EVERY_SPAN: f64 = 0.05;
 /// See [`FIRST`].
