@@ -45,6 +45,52 @@ pub struct RobotFile {
     /// it existed get the compiled-in assumption).
     #[serde(default = "ServoModel::compiled_in")]
     pub servo: ServoModel,
+    /// `[start]`: how a session starts wherever the arm stands and notices
+    /// an arm that stopped following (files written before it existed get
+    /// the compiled-in values).
+    #[serde(default = "StartPolicy::compiled_in")]
+    pub start: StartPolicy,
+}
+
+/// `[start]`: what the RSI session does with the arm it finds at RSI start
+/// (and after a stop): play where it stands within the home tolerance,
+/// else go home at the commissioning speed and rate; refuse a start whose
+/// `RIst` is not the forward kinematics of its `AIPos` (another TOOL or
+/// BASE); and notice an arm that stops following its commands.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct StartPolicy {
+    /// The arm is home within this distance, mm …
+    pub home_tolerance_mm: f64,
+    /// … and this turn, degrees.
+    pub home_tolerance_deg: f64,
+    /// The commissioning speed of the TCP on the way home, mm/s (KUKA's T1
+    /// allows 250).
+    pub speed_mm_s: f64,
+    /// The commissioning rate of the bat's turn on the way home, °/s.
+    pub rate_deg_s: f64,
+    /// `RIst` against the forward kinematics of `AIPos`: a start off by
+    /// this much is refused (TOOL_DATA or BASE_DATA), mm …
+    pub frames_tolerance_mm: f64,
+    /// … or this much, degrees.
+    pub frames_tolerance_deg: f64,
+    /// The arm stopped following: `RIst` this far from what the servo model
+    /// predicts, mm …
+    pub follow_tolerance_mm: f64,
+    /// … or turned this far from it, degrees …
+    pub follow_tolerance_deg: f64,
+    /// … for this many cycles in a row.
+    pub follow_cycles: u32,
+    /// A stopped arm is tried again once it has stood still this long, s.
+    pub still_s: f64,
+}
+
+impl StartPolicy {
+    /// The `[start]` of the compiled-in `calib/robot.toml`.
+    pub fn compiled_in() -> Self {
+        let file: RobotFile = toml::from_str(super::DEFAULT_ROBOT).expect("compiled-in calibration is valid (tested)");
+        file.start
+    }
 }
 
 /// How the robot's axes follow a correction, beyond RSI's own cycle: the
@@ -241,6 +287,11 @@ pub struct BadKey {
     pub value: f64,
 }
 
+/// KUKA's T1 limit on the TCP's speed, mm/s: `[start] speed_mm_s` stays within it.
+pub const T1_SPEED_MM_S: f64 = 250.0;
+/// The fastest commissioning turn `[start] rate_deg_s` may name, °/s.
+pub const MAX_COMMISSIONING_RATE_DEG_S: f64 = 90.0;
+
 /// The longest dead time `[servo]` may name, ms.
 pub const MAX_DEAD_TIME_MS: f64 = 100.0;
 /// The longest lag `[servo]` may name, ms.
@@ -397,7 +448,43 @@ impl RobotFile {
         if !(sv.lag_ms.is_finite() && (0.0..=MAX_LAG_MS).contains(&sv.lag_ms)) {
             return Err(BadKey { key: "servo.lag_ms (0-200 ms)", value: sv.lag_ms });
         }
+        let st = &self.start;
+        positive("start.home_tolerance_mm", &[st.home_tolerance_mm])?;
+        positive("start.home_tolerance_deg", &[st.home_tolerance_deg])?;
+        positive("start.speed_mm_s", &[st.speed_mm_s])?;
+        if st.speed_mm_s > T1_SPEED_MM_S {
+            return Err(BadKey { key: "start.speed_mm_s (KUKA T1: at most 250)", value: st.speed_mm_s });
+        }
+        positive("start.rate_deg_s", &[st.rate_deg_s])?;
+        if st.rate_deg_s > MAX_COMMISSIONING_RATE_DEG_S {
+            return Err(BadKey { key: "start.rate_deg_s (at most 90)", value: st.rate_deg_s });
+        }
+        positive("start.frames_tolerance_mm", &[st.frames_tolerance_mm])?;
+        positive("start.frames_tolerance_deg", &[st.frames_tolerance_deg])?;
+        positive("start.follow_tolerance_mm", &[st.follow_tolerance_mm])?;
+        positive("start.follow_tolerance_deg", &[st.follow_tolerance_deg])?;
+        if !(1..=100).contains(&st.follow_cycles) {
+            return Err(BadKey { key: "start.follow_cycles (1-100)", value: st.follow_cycles as f64 });
+        }
+        positive("start.still_s", &[st.still_s])?;
         Ok(())
+    }
+
+    /// What the way home must respect (`motion::homing`): `[start]`'s speed
+    /// and rate, the workspace box, `[poscorr]`.
+    pub fn homing_limits(&self) -> crate::motion::homing::HomingLimits {
+        let p = &self.poscorr;
+        crate::motion::homing::HomingLimits {
+            speed: self.start.speed_mm_s * 1e-3,
+            rate: self.start.rate_deg_s.to_radians(),
+            box_lo: self.workspace.min_xyz_m,
+            box_hi: self.workspace.max_xyz_m,
+            poscorr_lower_mm: p.lower_xyz_mm,
+            poscorr_upper_mm: p.upper_xyz_mm,
+            poscorr_rot_deg: p.max_rot_angle_deg,
+            mon_trans_mm: p.mon_max_trans_mm,
+            mon_rot_deg: p.mon_max_rot_deg,
+        }
     }
 
     /// The arm: its kinematics (chain and bat) and axis limits, in SI. For a

@@ -190,6 +190,11 @@ pub enum PlanRejected {
     /// it round.
     #[error("stroke's path leaves the axes' range or the workspace")]
     PathOutside,
+    /// The arm is not home and following (going home at commissioning
+    /// speed, held, or stopped by the controller): no stroke is planned
+    /// (`rsi::session`).
+    #[error("the arm is not home and following")]
+    NotHome,
 }
 
 impl PlanRejected {
@@ -210,6 +215,7 @@ impl PlanRejected {
             },
             PlanRejected::TooLate => "too_late",
             PlanRejected::PathOutside => "path_outside",
+            PlanRejected::NotHome => "not_home",
         }
     }
 }
@@ -314,6 +320,14 @@ impl StrokeGenerator {
         self.target = None;
         self.late_by = 0.0;
         self.go_home();
+    }
+
+    /// The box strokes keep to (x, y, z in B, m): the workspace, or less
+    /// of it where the controller's correction limits end sooner (a start
+    /// off home, `rsi::session`).
+    pub fn set_box(&mut self, lo: [f64; 3], hi: [f64; 3]) {
+        self.lim.lo[..3].copy_from_slice(&lo);
+        self.lim.hi[..3].copy_from_slice(&hi);
     }
 
     /// The current phase.

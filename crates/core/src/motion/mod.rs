@@ -24,6 +24,7 @@
 
 mod blend;
 pub mod generator;
+pub mod homing;
 pub mod limits;
 pub mod reach;
 pub mod safety;

@@ -4,10 +4,16 @@
 //! - [`xml`]: a tolerant, zero-allocation scanner.
 //! - [`codec`]: `<Rob>` and `<Sen>` parse/emit in KUKA units.
 //! - [`session`]: the daemon's sans-IO session (strokes → RKorr).
+//! - [`start`]: what the session finds at RSI start: a usable pose, the
+//!   calibration's tool and base (`RIst` against the kinematics of `AIPos`).
+//! - [`follow`]: whether the arm follows the commands (the servo model's
+//!   prediction against `RIst`).
 //! - [`identify`]: `topspin identify`'s sans-IO side (excitation → RKorr,
 //!   RIst → dead time and servo lag).
 
 pub mod codec;
+pub mod follow;
 pub mod identify;
 pub mod session;
+pub mod start;
 pub mod xml;

@@ -26,6 +26,20 @@
 //! (arrival − IPOC) over a sliding window, so arrival jitter does not shake
 //! the path. Only #ABSOLUTE mode is produced.
 //!
+//! Where the arm stands at RSI start (and every restart) decides what the
+//! session does ([`ArmMode`], `calib/robot.toml [start]`): within the
+//! home tolerance it plays; else it goes home first on a PTP-like way at
+//! the commissioning speed and rate (`motion::homing`), refusing plans
+//! until the arm is home; where that way is unsafe, or `RIst` is not the
+//! kinematics of `AIPos` under the calibration's tool and base
+//! ([`super::start`]), or the pose is unusable, it holds with zero
+//! corrections and says why once. Every cycle `RIst` is checked against
+//! what the servo model predicts for the commands sent ([`super::follow`]):
+//! an arm that stops following (brakes, an operator stop, a KSS error) ends
+//! the stroke; the session holds, brings its command onto where the arm
+//! stands (so that nothing jumps when the arm moves again) and, once the
+//! arm has stood still for `still_s`, goes home at commissioning speed.
+//!
 //! Two corrections, as the controller's RSI context is built
 //! ([`Correction`], `[rsi] correction`): Cartesian `<RKorr>` (POSCORR,
 //! BASE; the controller's own inverse kinematics turns it into joints) or
@@ -41,9 +55,13 @@
 use heapless::Deque;
 
 use super::codec::{Axes, CodecError, KukaPose, RobFrame, SenFrame, check_text};
+use super::follow::FollowMonitor;
+use super::start::{StartRefused, check_frames, read_start};
 use crate::calib::Calibration;
+use crate::calib::robot::StartPolicy;
 use crate::kinematics::{Joints, Pose, Unreachable};
 use crate::motion::generator::Phase;
+use crate::motion::homing::{HomingLimits, HomingPath, WayHomeBlocked};
 use crate::motion::limits::unwrap_near;
 use crate::motion::{MotionLimits, PlanRejected, Pose6, SafetyFilter, StrokeGenerator};
 use crate::plan::StrikePlan;
@@ -127,6 +145,11 @@ pub struct SessionConfig {
     pub servo: ServoCompensation,
     /// Cartesian (`RKorr`) or axis (`AKorr`) correction.
     pub correction: Correction,
+    /// Where the arm may start, the way home, and the follow check
+    /// (`robot.toml [start]`).
+    pub start: StartPolicy,
+    /// What the way home must respect (speed, rate, box, POSCORR).
+    pub homing: HomingLimits,
 }
 
 /// The servo the session commands through.
@@ -170,8 +193,24 @@ impl SessionConfig {
                 enabled: true,
             },
             correction: Correction::Cartesian,
+            start: c.robot.start.clone(),
+            homing: c.robot.homing_limits(),
         }
     }
+}
+
+/// What the session does with the arm (see the module doc).
+#[derive(Copy, Clone, Debug, PartialEq, Eq)]
+pub enum ArmMode {
+    /// Home (or within its tolerance) and following: strokes are planned.
+    Playing,
+    /// On the way home at the commissioning speed; plans are refused.
+    Homing,
+    /// Held where it stands until RSI restarts: the start was refused.
+    Held,
+    /// The arm stopped following: the command is brought onto where it
+    /// stands; once it stands still, the way home is tried.
+    Stopped,
 }
 
 /// Where the session stands.
@@ -253,6 +292,30 @@ pub enum SessionEvent {
     RobotSilent,
     /// The stroke moved to another phase.
     PhaseChanged(Phase),
+    /// The start cannot be used (or, after a stop, the way home is
+    /// unsafe): the session holds, nothing moves until RSI restarts.
+    StartRefused(StartRefused),
+    /// The arm goes home at the commissioning speed.
+    GoingHome {
+        /// How far it stands from home, mm …
+        from_mm: f64,
+        /// … and degrees.
+        from_deg: f64,
+        /// How long the way takes.
+        duration: Duration,
+    },
+    /// The arm is home and following: plans are taken.
+    Home,
+    /// `RIst` left the servo model's prediction for `follow_cycles` cycles:
+    /// the arm stopped following.
+    ArmStopped {
+        /// The last error, mm …
+        error_mm: f64,
+        /// … and degrees.
+        error_deg: f64,
+        /// A stroke was under way (it is abandoned).
+        stroke_abandoned: bool,
+    },
     /// Axis mode: the commanded pose has no joint solution within the
     /// software limits (first cycle of a run of them); the last axis
     /// correction holds.
@@ -294,6 +357,14 @@ pub struct SessionStats {
     /// Axis mode: cycles whose pose had no joints within the limits (the
     /// last correction held).
     pub axis_held: u64,
+    /// Starts refused (held until RSI restarts).
+    pub starts_refused: u64,
+    /// Ways home at the commissioning speed begun.
+    pub ways_home: u64,
+    /// Times the arm stopped following.
+    pub arm_stops: u64,
+    /// Strokes abandoned because the arm stopped following.
+    pub strokes_abandoned: u64,
 }
 
 /// Why a datagram got no answer.
@@ -346,6 +417,18 @@ pub struct RsiSession {
     last_phase: Phase,
     clamping: bool,
     pending: Option<StrikePlan>,
+    mode: ArmMode,
+    homing: Option<HomingPath>,
+    /// The way home's start pose as commanded, and the offset of that
+    /// pose from the kinematics of the way's first joints (blended out
+    /// along the way, so its first step is no jump).
+    homing_offset: Pose6,
+    follow: FollowMonitor,
+    /// The joints of the correction sent last (feed-forward included).
+    sent_joints: Joints,
+    /// Stopped: the last `RIst` and how long the arm has stood still.
+    last_rist: Pose6,
+    still_cycles: u32,
     clock_cur: i128,
     clock_prev: i128,
     clock_count: u32,
@@ -354,6 +437,10 @@ pub struct RsiSession {
 }
 
 const NS_PER_MS: i128 = 1_000_000;
+/// A stopped arm stands still when `RIst` moves less than this per cycle
+/// (m, rad), and the command is on it within the same.
+const STILL_M: f64 = 0.0002;
+const STILL_RAD: f64 = 0.001;
 
 impl RsiSession {
     /// A session waiting for the controller's first request.
@@ -370,6 +457,17 @@ impl RsiSession {
         }
         let home = cfg.limits.home;
         let home_joints = cfg.limits.home_joints;
+        let dt = cfg.limits.dt;
+        let alpha = if cfg.servo.lag_s > 0.0 { crate::calib::robot::lag_step(dt, cfg.servo.lag_s) } else { 1.0 };
+        let dead = (cfg.servo.dead_time.as_secs_f64() / dt).round() as usize;
+        let st = &cfg.start;
+        let follow = FollowMonitor::new(
+            alpha,
+            dead,
+            st.follow_tolerance_mm * 1e-3,
+            st.follow_tolerance_deg.to_radians(),
+            st.follow_cycles,
+        );
         Ok(RsiSession {
             generator: StrokeGenerator::new(cfg.limits.clone(), Instant(0), home),
             safety: SafetyFilter::new(&cfg.limits, home),
@@ -389,6 +487,13 @@ impl RsiSession {
             last_phase: Phase::Hold,
             clamping: false,
             pending: None,
+            mode: ArmMode::Playing,
+            homing: None,
+            homing_offset: [0.0; 6],
+            follow,
+            sent_joints: home_joints,
+            last_rist: home,
+            still_cycles: 0,
             clock_cur: i128::MAX,
             clock_prev: i128::MAX,
             clock_count: 0,
@@ -450,6 +555,21 @@ impl RsiSession {
         self.last_sent_joints
     }
 
+    /// What the session does with the arm.
+    pub fn arm_mode(&self) -> ArmMode {
+        self.mode
+    }
+
+    /// The way home under way (or the last one).
+    pub fn homing_path(&self) -> Option<&HomingPath> {
+        self.homing.as_ref()
+    }
+
+    /// The follow check (its last and largest errors).
+    pub fn follow_monitor(&self) -> &FollowMonitor {
+        &self.follow
+    }
+
     /// The stroke generator (phase, target, lateness).
     pub fn generator(&self) -> &StrokeGenerator {
         &self.generator
@@ -482,7 +602,8 @@ impl RsiSession {
         self.stats.requests += 1;
         self.last_rx = Some(now);
         let mut step = true;
-        if self.state != SessionState::Running {
+        let first = self.state != SessionState::Running;
+        if first {
             self.begin(now, &rob);
         } else {
             let expected = self.last_ipoc.wrapping_add(self.cfg.cycle_ms as u64);
@@ -493,9 +614,11 @@ impl RsiSession {
             } else if rob.ipoc < self.last_ipoc {
                 self.push(SessionEvent::IpocBackwards { last: self.last_ipoc, got: rob.ipoc });
                 self.reset_clock();
+                self.resync_follow(&rob);
             } else if rob.ipoc != expected {
                 self.stats.ipoc_gaps += 1;
                 self.push(SessionEvent::IpocGap { expected, got: rob.ipoc });
+                self.resync_follow(&rob);
             }
         }
         if let Some(d) = rob.delay {
@@ -507,8 +630,18 @@ impl RsiSession {
         self.last_ipoc = rob.ipoc;
         if step {
             let t = self.setpoint_time(now, rob.ipoc);
-            self.take_plan();
-            self.step(t, rob.ipoc);
+            if !first && self.watch(&rob) {
+                self.arm_stopped();
+            } else {
+                self.take_plan();
+                match self.mode {
+                    ArmMode::Playing => self.step(t, rob.ipoc),
+                    ArmMode::Homing => self.step_homing(t, rob.ipoc),
+                    ArmMode::Stopped => self.step_stopped(t, &rob),
+                    ArmMode::Held => {}
+                }
+            }
+            self.follow.commanded(&self.sent_joints);
         }
         let axis = self.cfg.correction == Correction::Axis;
         let answer = SenFrame {
@@ -550,40 +683,292 @@ impl RsiSession {
 
     fn begin(&mut self, now: Instant, rob: &RobFrame) {
         let home = self.cfg.limits.home;
-        let mut off_home = false;
-        self.start = match rob.rist {
+        let arm = self.cfg.limits.arm.clone();
+        let arm = &arm;
+        let near = self.cfg.limits.home_joints;
+        let st = self.cfg.start.clone();
+        let read = read_start(arm, rob.rist, rob.aipos);
+        // An unusable pose: hold at the (unknown) start with zero corrections.
+        let (pose, aipos) = match read {
+            Ok((p, q)) => (Some(p), q),
+            Err(_) => (None, None),
+        };
+        self.start = match pose {
             Some(p) => {
-                let mut s = [p.x * 1e-3, p.y * 1e-3, p.z * 1e-3, p.a.to_radians(), p.b.to_radians(), p.c.to_radians()];
+                let mut s = p.to_pose6();
                 for i in 3..6 {
                     s[i] = unwrap_near(s[i], home[i]);
                 }
-                off_home = (0..3).any(|i| (s[i] - home[i]).abs() > 0.005)
-                    || (3..6).any(|i| (s[i] - home[i]).abs() > 1f64.to_radians());
                 s
             }
             None => home,
         };
+        let (from_mm, from_deg) = Pose::from_pose6(&self.start).distance(&Pose::from_pose6(&home));
+        let (from_mm, from_deg) = (from_mm * 1e3, from_deg.to_degrees());
+        let off_home = from_mm > st.home_tolerance_mm || from_deg > st.home_tolerance_deg;
         self.reset_clock();
         let t = self.setpoint_time(now, rob.ipoc);
         // The first setpoint is one cycle after the generator's start.
         let t_start = Instant(t.0.saturating_sub(self.cfg.cycle_ms as u64 * 1_000_000));
         self.generator.reset(t_start, self.start);
         self.safety.reset(self.start);
-        let arm = &self.cfg.limits.arm;
-        let near = self.cfg.limits.home_joints;
-        self.start_joints = match rob.aipos {
-            Some(a) if a.iter().all(|x| x.is_finite()) => Joints::from_degrees(a),
-            _ => arm.inverse_near(&Pose::from_pose6(&self.start), &near).unwrap_or(near),
+        self.start_joints = match aipos {
+            Some(q) => q,
+            None => arm.inverse_near(&Pose::from_pose6(&self.start), &near).unwrap_or(near),
         };
         self.last_sent_joints = self.start_joints;
         self.last_axis_correction = [0.0; 6];
         self.holding = false;
         self.last_correction = KukaPose::default();
         self.last_command = self.start;
+        self.sent_joints = self.start_joints;
         self.last_joints_valid = false;
         self.clamping = false;
+        self.homing = None;
+        self.follow.reset(self.start_joints);
+        self.fit_box();
         self.state = SessionState::Running;
         self.push(SessionEvent::Started { ipoc: rob.ipoc, off_home });
+        let checked = read.and_then(|(p, q)| match q {
+            Some(q) => match check_frames(arm, &p, &q, st.frames_tolerance_mm, st.frames_tolerance_deg) {
+                Some(m) => Err(StartRefused::Frames(m)),
+                None => Ok(()),
+            },
+            None => Ok(()),
+        });
+        self.mode = ArmMode::Playing;
+        match checked {
+            Err(r) => self.refuse(r),
+            Ok(()) if off_home => {
+                let (q, p) = (self.start_joints, self.start);
+                self.go_home_from(t, q, p);
+            }
+            Ok(()) => self.push(SessionEvent::Home),
+        }
+    }
+
+    /// The stroke box: the workspace within what POSCORR lets through from
+    /// this start (the same box when the start is home).
+    fn fit_box(&mut self) {
+        let h = &self.cfg.homing;
+        let mut lo = [0.0; 3];
+        let mut hi = [0.0; 3];
+        lo.copy_from_slice(&self.cfg.limits.lo[..3]);
+        hi.copy_from_slice(&self.cfg.limits.hi[..3]);
+        for i in 0..3 {
+            lo[i] = lo[i].max(self.start[i] + h.poscorr_lower_mm[i] * 1e-3);
+            hi[i] = hi[i].min(self.start[i] + h.poscorr_upper_mm[i] * 1e-3).max(lo[i]);
+        }
+        self.generator.set_box(lo, hi);
+        self.safety.set_box(lo, hi);
+    }
+
+    /// Holds where the arm stands, said once.
+    fn refuse(&mut self, r: StartRefused) {
+        self.mode = ArmMode::Held;
+        self.homing = None;
+        self.stats.starts_refused += 1;
+        self.push(SessionEvent::StartRefused(r));
+    }
+
+    /// The way home from joints `q` (commanded pose `p`), starting at `t`;
+    /// held where it is unsafe.
+    fn go_home_from(&mut self, t: Instant, q: Joints, p: Pose6) {
+        let arm = self.cfg.limits.arm.clone();
+        let arm = &arm;
+        let home = self.cfg.limits.home_joints;
+        match HomingPath::plan(arm, &self.cfg.homing, &self.start, &q, &home, t.as_secs_f64()) {
+            Ok(path) => {
+                let fk = arm.tcp(&q).to_pose6();
+                self.homing_offset =
+                    core::array::from_fn(|i| if i < 3 { p[i] - fk[i] } else { unwrap_near(p[i], fk[i]) - fk[i] });
+                let (d, a) = Pose::from_pose6(&p).distance(&Pose::from_pose6(&self.cfg.limits.home));
+                self.stats.ways_home += 1;
+                self.push(SessionEvent::GoingHome {
+                    from_mm: d * 1e3,
+                    from_deg: a.to_degrees(),
+                    duration: Duration((path.duration() * 1e9) as u64),
+                });
+                self.homing = Some(path);
+                self.mode = ArmMode::Homing;
+                self.last_joints_valid = false;
+            }
+            Err(e) => self.refuse(StartRefused::WayHome(e)),
+        }
+    }
+
+    /// One cycle of the way home: the path's joints (their pose, with the
+    /// start's offset blended out) become the correction.
+    fn step_homing(&mut self, t: Instant, ipoc: u64) {
+        let Some(path) = self.homing else {
+            self.mode = ArmMode::Held;
+            return;
+        };
+        let ts = t.as_secs_f64();
+        let q = path.joints_at(ts);
+        let arm = &self.cfg.limits.arm;
+        let fk = arm.tcp(&q).to_pose6();
+        let s_left = if path.duration() > 0.0 { 1.0 - path.progress(ts) } else { 0.0 };
+        let mut p: Pose6 = core::array::from_fn(|i| fk[i] + s_left * self.homing_offset[i]);
+        for i in 3..6 {
+            p[i] = unwrap_near(p[i], self.last_command[i]);
+        }
+        // The last line: no step beyond the commissioning speed and rate
+        // (the way is planned within them; a step past them holds).
+        let (d, a) = Pose::from_pose6(&p).distance(&Pose::from_pose6(&self.last_command));
+        let dt = self.cfg.limits.dt;
+        let h = &self.cfg.homing;
+        if d > h.speed * dt * 1.01 + 1e-6 || a > h.rate * dt * 1.01 + 1e-6 {
+            self.refuse(StartRefused::WayHome(WayHomeBlocked::StepTooLarge { mm: d * 1e3, deg: a.to_degrees() }));
+            return;
+        }
+        match self.cfg.correction {
+            Correction::Cartesian => self.cartesian_correction(&p, &p, q),
+            Correction::Axis => self.send_joints(q, &p),
+        }
+        if path.done(ts) {
+            // Home, at rest: the generator and the filter start from here.
+            let home = self.cfg.limits.home;
+            let t_start = Instant(t.0.saturating_sub(self.cfg.cycle_ms as u64 * 1_000_000));
+            self.generator.reset(t_start, home);
+            self.safety.reset(home);
+            self.last_command = home;
+            self.last_joints_valid = false;
+            self.mode = ArmMode::Playing;
+            self.push(SessionEvent::Home);
+        }
+        let _ = ipoc;
+    }
+
+    /// Stopped: the command goes onto where the arm stands (at the
+    /// commissioning speed and rate); once the arm has stood still for
+    /// `still_s`, the way home from there.
+    fn step_stopped(&mut self, t: Instant, rob: &RobFrame) {
+        let Some(rist) = rob.rist.map(|k| self.pose_of(k)).filter(|p| p.iter().all(|x| x.is_finite())) else {
+            return; // nothing to go by: hold
+        };
+        let dt = self.cfg.limits.dt;
+        let h = &self.cfg.homing;
+        let mut cmd = self.last_command;
+        let gap = (0..3).map(|i| (rist[i] - cmd[i]).powi(2)).sum::<f64>().sqrt();
+        let step = if gap > h.speed * dt { h.speed * dt / gap } else { 1.0 };
+        for i in 0..3 {
+            cmd[i] += step * (rist[i] - cmd[i]);
+        }
+        for i in 3..6 {
+            let d = unwrap_near(rist[i], cmd[i]) - cmd[i];
+            cmd[i] += d.clamp(-h.rate * dt, h.rate * dt);
+        }
+        match self.cfg.correction {
+            Correction::Cartesian => {
+                let arm = &self.cfg.limits.arm;
+                let q = arm.inverse_near(&Pose::from_pose6(&cmd), &self.sent_joints).unwrap_or(self.sent_joints);
+                self.cartesian_correction(&cmd, &cmd, q)
+            }
+            Correction::Axis => self.axis_correction(&cmd, &cmd, rob.ipoc),
+        }
+        let moved = (0..3).map(|i| (rist[i] - self.last_rist[i]).abs()).fold(0.0, f64::max);
+        let turned =
+            (3..6).map(|i| (unwrap_near(rist[i], self.last_rist[i]) - self.last_rist[i]).abs()).fold(0.0, f64::max);
+        let on_arm = (0..3).all(|i| (rist[i] - cmd[i]).abs() < STILL_M)
+            && (3..6).all(|i| (unwrap_near(rist[i], cmd[i]) - cmd[i]).abs() < STILL_RAD);
+        self.last_rist = rist;
+        if moved < STILL_M && turned < STILL_RAD && on_arm {
+            self.still_cycles += 1;
+        } else {
+            self.still_cycles = 0;
+        }
+        if self.still_cycles as f64 * dt >= self.cfg.start.still_s {
+            let arm = &self.cfg.limits.arm;
+            let q = match rob.aipos.map(Joints::from_degrees) {
+                Some(q) if q.0.iter().all(|x| x.is_finite()) => q,
+                _ => {
+                    arm.inverse_near(&Pose::from_pose6(&rist), &self.last_sent_joints).unwrap_or(self.last_sent_joints)
+                }
+            };
+            self.follow.resync(q);
+            let st = &self.cfg.start;
+            let (d, a) = Pose::from_pose6(&cmd).distance(&Pose::from_pose6(&self.cfg.limits.home));
+            if d * 1e3 <= st.home_tolerance_mm && a.to_degrees() <= st.home_tolerance_deg {
+                let t_start = Instant(t.0.saturating_sub(self.cfg.cycle_ms as u64 * 1_000_000));
+                self.generator.reset(t_start, cmd);
+                self.safety.reset(cmd);
+                self.last_joints_valid = false;
+                self.mode = ArmMode::Playing;
+                self.push(SessionEvent::Home);
+            } else {
+                self.go_home_from(t, q, cmd);
+            }
+        }
+    }
+
+    /// `RIst` in the session's units (m, rad; angles near the last command).
+    fn pose_of(&self, k: KukaPose) -> Pose6 {
+        let mut p = [k.x * 1e-3, k.y * 1e-3, k.z * 1e-3, k.a.to_radians(), k.b.to_radians(), k.c.to_radians()];
+        for i in 3..6 {
+            p[i] = unwrap_near(p[i], self.last_command[i]);
+        }
+        p
+    }
+
+    /// Does the arm follow? True when it stopped (checked while playing or
+    /// going home: the way home with a third of the tolerance).
+    fn watch(&mut self, rob: &RobFrame) -> bool {
+        let scale = match self.mode {
+            ArmMode::Playing => 1.0,
+            ArmMode::Homing => 1.0 / 3.0,
+            ArmMode::Held | ArmMode::Stopped => return false,
+        };
+        let Some(k) = rob.rist else { return false };
+        let p = Pose::from_pose6(&self.pose_of(k));
+        self.follow.observe(&p, &self.cfg.limits.arm, scale)
+    }
+
+    /// The model restarts from the arm's pose (cycles were missed).
+    fn resync_follow(&mut self, rob: &RobFrame) {
+        let q = match (rob.aipos.map(Joints::from_degrees), rob.rist) {
+            (Some(q), _) if q.0.iter().all(|x| x.is_finite()) => q,
+            (_, Some(k)) => {
+                let p = Pose::from_pose6(&self.pose_of(k));
+                match self.cfg.limits.arm.inverse_near(&p, &self.follow.predicted()) {
+                    Ok(q) => q,
+                    Err(_) => return,
+                }
+            }
+            _ => return,
+        };
+        self.follow.resync(q);
+    }
+
+    /// The arm stopped following: the stroke ends, the last command holds.
+    fn arm_stopped(&mut self) {
+        let abandoned = self.mode == ArmMode::Playing && self.generator.phase() != Phase::Hold;
+        self.stats.arm_stops += 1;
+        if abandoned {
+            self.stats.strokes_abandoned += 1;
+        }
+        let (e, a) = self.follow.error;
+        self.push(SessionEvent::ArmStopped {
+            error_mm: e * 1e3,
+            error_deg: a.to_degrees(),
+            stroke_abandoned: abandoned,
+        });
+        self.mode = ArmMode::Stopped;
+        self.homing = None;
+        self.still_cycles = 0;
+        self.last_rist = [f64::NAN; 6];
+    }
+
+    /// Axis mode: joints `q` (pose `p`) sent as they are.
+    fn send_joints(&mut self, q: Joints, p: &Pose6) {
+        let start = self.start_joints;
+        let a: Axes = core::array::from_fn(|i| (q.0[i] - start.0[i]).to_degrees());
+        if a.iter().all(|x| x.is_finite()) {
+            self.last_sent_joints = q;
+            self.last_axis_correction = a;
+            self.last_command = *p;
+            self.sent_joints = q;
+        }
     }
 
     fn reset_clock(&mut self) {
@@ -611,6 +996,11 @@ impl RsiSession {
 
     fn take_plan(&mut self) {
         if let Some(plan) = self.pending.take() {
+            if self.mode != ArmMode::Playing {
+                self.stats.plans_rejected += 1;
+                self.push(SessionEvent::PlanRejected { seq: plan.seq, reason: PlanRejected::NotHome });
+                return;
+            }
             match self.generator.set_plan(&plan) {
                 Ok(t) => {
                     let clamped = t.clamped;
@@ -658,23 +1048,28 @@ impl RsiSession {
             let p = self.cfg.limits.arm.tcp(&q).to_pose6();
             (0..3).all(|i| (p[i] - cmd[i]).abs() < 1e-6)
         };
-        let sent: Pose6 = if gain > 0.0 && consistent && self.last_joints_valid {
+        let (sent, sent_joints): (Pose6, Option<Joints>) = if gain > 0.0 && consistent && self.last_joints_valid {
             let lead = Joints(core::array::from_fn(|i| q.0[i] + gain * (q.0[i] - self.last_joints.0[i])));
             let p = self.cfg.limits.arm.tcp(&lead).to_pose6();
-            core::array::from_fn(|i| if i < 3 { p[i] } else { unwrap_near(p[i], cmd[i]) })
+            (core::array::from_fn(|i| if i < 3 { p[i] } else { unwrap_near(p[i], cmd[i]) }), Some(lead))
         } else {
-            core::array::from_fn(|i| cmd[i] + gain * (cmd[i] - self.last_command[i]))
+            let sent = core::array::from_fn(|i| cmd[i] + gain * (cmd[i] - self.last_command[i]));
+            (sent, (gain == 0.0 && consistent).then_some(q))
         };
         self.last_joints = q;
         self.last_joints_valid = consistent;
         match self.cfg.correction {
-            Correction::Cartesian => self.cartesian_correction(&sent, &cmd),
+            Correction::Cartesian => {
+                let arm = &self.cfg.limits.arm;
+                let qs = sent_joints.unwrap_or_else(|| arm.inverse_near(&Pose::from_pose6(&sent), &q).unwrap_or(q));
+                self.cartesian_correction(&sent, &cmd, qs)
+            }
             Correction::Axis => self.axis_correction(&sent, &cmd, ipoc),
         }
     }
 
     /// RKorr: `sent` − the start pose, mm and degrees (angles within ±180°).
-    fn cartesian_correction(&mut self, sent: &Pose6, cmd: &Pose6) {
+    fn cartesian_correction(&mut self, sent: &Pose6, cmd: &Pose6, q: Joints) {
         let mut k = [0.0; 6];
         for i in 0..3 {
             k[i] = (sent[i] - self.start[i]) * 1e3;
@@ -686,6 +1081,7 @@ impl RsiSession {
         if k.iter().all(|x| x.is_finite()) {
             self.last_correction = KukaPose::from_array(k);
             self.last_command = *cmd;
+            self.sent_joints = q;
         }
     }
 
@@ -707,6 +1103,7 @@ impl RsiSession {
                 self.last_sent_joints = q;
                 self.last_axis_correction = a;
                 self.last_command = *cmd;
+                self.sent_joints = q;
                 self.holding = false;
             }
             Err(reason) => {

@@ -24,6 +24,15 @@
 //! as for an answer with no correction at all, and it is counted
 //! (`wrong_kind`).
 //!
+//! The program around RSI may run other frames than the sensor's
+//! calibration: `ControllerConfig::base` is its BASE_DATA (poses, `RIst`
+//! and the commanded pose, are in that frame), and the arm's tool its
+//! TOOL_DATA. Brakes ([`Brakes`]: an operator stop, the enabling switch,
+//! the load check) hold the axes where they are for a while, as RSI goes
+//! on; when they open, the drives take up the command from where the axes
+//! stand, through the lag, and a command far from them stops the robot
+//! through the gear-torque check.
+//!
 //! It stops as a KR C4 does, naming the reason ([`StopReason`]): a
 //! commanded pose out of reach or past a software limit switch, a wrist
 //! through its singularity, an axis turning or accelerating beyond its
@@ -50,6 +59,21 @@ pub const MAX_DEAD_TIME_CYCLES: usize = 32;
 /// A pose in KUKA's units (mm, degrees A/B/C) as a kinematics pose (m, rad).
 fn kuka_pose(p: &[f64; 6]) -> Pose {
     Pose::from_xyz_abc([p[0], p[1], p[2]].map(|x| x * 1e-3), [p[3], p[4], p[5]].map(f64::to_radians))
+}
+
+/// Brakes applied at a cycle for a number of cycles.
+#[derive(Copy, Clone, Debug, PartialEq, Eq)]
+pub struct Brakes {
+    /// The first braked cycle (0: the first cycle of the run).
+    pub at_cycle: u64,
+    /// How many cycles they hold.
+    pub cycles: u64,
+}
+
+impl Brakes {
+    fn hold(&self, cycle: u64) -> bool {
+        cycle >= self.at_cycle && cycle - self.at_cycle < self.cycles
+    }
 }
 
 /// How RKorr is applied.
@@ -170,6 +194,21 @@ pub struct ControllerConfig {
     pub axis_mon_max_deg: [f64; 6],
     /// First IPOC.
     pub first_ipoc: u64,
+    /// The program's BASE_DATA relative to the robot's foot ($ROBROOT):
+    /// the frame of `RIst`, `RSol`, `start` and the commanded pose.
+    pub base: Pose,
+    /// Brakes applied during the run, if any.
+    pub brakes: Option<Brakes>,
+}
+
+impl ControllerConfig {
+    /// The arm standing at joints `q` (rad) at RSI start: `start` is their
+    /// TCP in `base`.
+    pub fn stand_at(&mut self, q: Joints) {
+        let p = self.base.inverse().compose(&self.arm.tcp(&q)).to_pose6();
+        self.start = [p[0] * 1e3, p[1] * 1e3, p[2] * 1e3, p[3].to_degrees(), p[4].to_degrees(), p[5].to_degrees()];
+        self.start_joints = q;
+    }
 }
 
 /// One cycle of the logged TCP path.
@@ -229,6 +268,8 @@ pub struct MockController {
     /// Cycles with an axis over its speed or acceleration limit (not
     /// stopped: `stop_on_axis_rates` off).
     pub rates_over: u64,
+    /// Cycles the brakes held the axes.
+    pub braked_cycles: u64,
     pub stopped: Option<StopReason>,
 }
 
@@ -239,7 +280,10 @@ impl MockController {
         assert!((cfg.dead_time_cycles as usize) < MAX_DEAD_TIME_CYCLES, "dead time too long");
         // The joints of the start pose: the solution nearest `start_joints`
         // (a robot restarted off home stands where it stopped).
-        let q0 = cfg.arm.inverse_near(&kuka_pose(&cfg.start), &cfg.start_joints).unwrap_or(cfg.start_joints);
+        let q0 = cfg
+            .arm
+            .inverse_near(&cfg.base.compose(&kuka_pose(&cfg.start)), &cfg.start_joints)
+            .unwrap_or(cfg.start_joints);
         let line = VecDeque::from(vec![q0; cfg.dead_time_cycles as usize]);
         let dt = cfg.cycle_ms as f64 * 1e-3;
         let lag_step = topspin_core::calib::robot::lag_step(dt, cfg.lag_s);
@@ -267,6 +311,7 @@ impl MockController {
             peak_speed_share: 0.0,
             peak_acceleration_share: 0.0,
             rates_over: 0,
+            braked_cycles: 0,
             stopped: None,
             cfg,
         }
@@ -309,9 +354,14 @@ impl MockController {
     /// there through the dead time and the lag.
     pub fn move_start(&mut self, start: [f64; 6]) {
         self.cfg.start = start;
-        if let Ok(q) = self.cfg.arm.inverse_near(&kuka_pose(&start), &self.q_cmd) {
+        if let Ok(q) = self.cfg.arm.inverse_near(&self.cfg.base.compose(&kuka_pose(&start)), &self.q_cmd) {
             self.q_start = q;
         }
+    }
+
+    /// Brakes from the next cycle on, for `cycles` cycles.
+    pub fn apply_brakes(&mut self, cycles: u64) {
+        self.cfg.brakes = Some(Brakes { at_cycle: self.cycles, cycles });
     }
 
     /// Offers an answer received before this cycle's deadline.
@@ -464,7 +514,7 @@ impl MockController {
             return;
         }
         self.q_cmd = q;
-        let p = c.arm.tcp(&q).to_pose6();
+        let p = c.base.inverse().compose(&c.arm.tcp(&q)).to_pose6();
         for i in 0..3 {
             self.commanded[i] = p[i] * 1e3;
         }
@@ -477,7 +527,7 @@ impl MockController {
     /// commanded joints, within the software limit switches and off the
     /// singular wrist; else the robot stops.
     fn command_joints(&mut self) {
-        match self.cfg.arm.inverse_near(&kuka_pose(&self.commanded), &self.q_cmd) {
+        match self.cfg.arm.inverse_near(&self.cfg.base.compose(&kuka_pose(&self.commanded)), &self.q_cmd) {
             Ok(q) => match self.cfg.arm.limits.check_position(&q) {
                 Ok(()) => self.q_cmd = q,
                 Err(v) => self.stopped = Some(StopReason::Axis(v)),
@@ -499,6 +549,12 @@ impl MockController {
             self.line.push_back(self.q_cmd); // one out, one in: no allocation
             oldest
         };
+        if self.cfg.brakes.is_some_and(|b| b.hold(self.cycles)) {
+            // The axes stand; the drives start from rest when they open.
+            self.qd_act = [0.0; AXES];
+            self.braked_cycles += 1;
+            return;
+        }
         let mut q = self.q_act;
         let mut qd = [0.0; AXES];
         let mut qdd = [0.0; AXES];
@@ -524,7 +580,7 @@ impl MockController {
         }
         self.q_act = q;
         self.qd_act = qd;
-        let tcp = self.cfg.arm.tcp(&q);
+        let tcp = self.cfg.base.inverse().compose(&self.cfg.arm.tcp(&q));
         let p = tcp.to_pose6();
         for i in 0..3 {
             self.actual[i] = p[i] * 1e3;

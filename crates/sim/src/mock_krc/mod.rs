@@ -21,6 +21,6 @@ pub mod faults;
 pub mod pair;
 pub mod runner;
 
-pub use controller::{CorrMode, MockController, PathSample, StopReason};
+pub use controller::{Brakes, CorrMode, MockController, PathSample, StopReason};
 pub use faults::Faults;
 pub use runner::{MockHandle, MockKrcConfig, MockResult, run, spawn};

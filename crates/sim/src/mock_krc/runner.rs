@@ -86,6 +86,8 @@ impl MockKrcConfig {
             axis_upper_deg: context.axis_upper_deg,
             axis_mon_max_deg: context.axis_mon_max_deg,
             first_ipoc: 4_208_831,
+            base: topspin_core::kinematics::Pose::identity(),
+            brakes: None,
         };
         MockKrcConfig {
             controller,
