@@ -67,6 +67,11 @@ pub struct DemoArgs {
     /// rate, a foreign ball, teleports, a clock jump): `sim::faults`.
     #[arg(long)]
     pub tracker_faults: bool,
+    /// Where the mock KR C4's arm stands when RSI starts: joints A1..A6 in
+    /// degrees, comma-separated (default: home). The daemon takes it home
+    /// at the commissioning speed first, or holds where that is unsafe.
+    #[arg(long, value_name = "A1,..,A6", value_parser = super::mock_krc::parse_six, allow_hyphen_values = true)]
+    pub start_joints: Option<[f64; 6]>,
 }
 
 pub fn run(a: DemoArgs) -> anyhow::Result<()> {
@@ -118,6 +123,7 @@ pub fn run(a: DemoArgs) -> anyhow::Result<()> {
         record: a.record.clone(),
         late_limit: a.late_limit,
         tracker_faults: a.tracker_faults.then(topspin_sim::faults::TrackerFaults::all),
+        start_joints: a.start_joints,
         ..DemoConfig::default()
     };
     if !a.json {

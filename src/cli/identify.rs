@@ -209,6 +209,11 @@ pub fn run(a: IdentifyArgs) -> anyhow::Result<()> {
                 report.error = Some(reason.clone());
                 println!("{}", serde_json::to_string_pretty(&report)?);
             }
+            // Another TOOL or BASE than the calibration is the cell's
+            // configuration, not a failed measurement: exit 2.
+            if matches!(id.finish(), Err(topspin_core::rsi::identify::IdentifyError::Frames(_))) {
+                return Err(BadInput(format!("identify refused at the first request: {reason}")).into());
+            }
             Err(anyhow::anyhow!(reason))
         }
     }

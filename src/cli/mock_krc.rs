@@ -76,6 +76,49 @@ pub struct MockKrcArgs {
     /// Write the TCP path here (CSV).
     #[arg(long)]
     pub csv: Option<PathBuf>,
+    /// Where the arm stands when RSI starts: joints A1..A6, degrees,
+    /// comma-separated (default: the calibration's home).
+    #[arg(long, value_name = "A1,..,A6", value_parser = parse_six, allow_hyphen_values = true)]
+    pub start_joints: Option<[f64; 6]>,
+    /// Or the pose it stands at: X,Y,Z (mm), A,B,C (degrees) in BASE; the
+    /// joints are its solution nearest --start-joints (default: home).
+    #[arg(long, value_name = "X,Y,Z,A,B,C", value_parser = parse_six, allow_hyphen_values = true)]
+    pub start_pose: Option<[f64; 6]>,
+    /// The KRL program's TOOL_DATA (X,Y,Z mm, A,B,C degrees in the flange
+    /// frame; default: calib/robot.toml's bat): RIst is its TCP.
+    #[arg(long, value_name = "X,Y,Z,A,B,C", value_parser = parse_six, allow_hyphen_values = true)]
+    pub tool_data: Option<[f64; 6]>,
+    /// The KRL program's BASE_DATA relative to the robot's foot (default:
+    /// the foot itself): RIst and the corrections are in it.
+    #[arg(long, value_name = "X,Y,Z,A,B,C", value_parser = parse_six, allow_hyphen_values = true)]
+    pub base_data: Option<[f64; 6]>,
+    /// Brakes applied at cycle N for M cycles (an operator stop, the load
+    /// check): the axes stand while RSI goes on.
+    #[arg(long, value_name = "N:M", value_parser = parse_brakes)]
+    pub brakes: Option<topspin_sim::mock_krc::Brakes>,
+}
+
+/// Six comma-separated numbers.
+pub(crate) fn parse_six(s: &str) -> Result<[f64; 6], String> {
+    let v: Vec<f64> =
+        s.split(',').map(|x| x.trim().parse::<f64>().map_err(|e| format!("{x:?}: {e}"))).collect::<Result<_, _>>()?;
+    let v: [f64; 6] = v.try_into().map_err(|v: Vec<f64>| format!("{} numbers, not 6", v.len()))?;
+    if v.iter().all(|x| x.is_finite()) { Ok(v) } else { Err("not finite".into()) }
+}
+
+fn parse_brakes(s: &str) -> Result<topspin_sim::mock_krc::Brakes, String> {
+    let (n, m) = s.split_once(':').ok_or("N:M (the first braked cycle, how many)")?;
+    let at_cycle = n.trim().parse().map_err(|e| format!("{n:?}: {e}"))?;
+    let cycles = m.trim().parse().map_err(|e| format!("{m:?}: {e}"))?;
+    Ok(topspin_sim::mock_krc::Brakes { at_cycle, cycles })
+}
+
+/// A KUKA frame (mm, degrees) as a pose.
+fn frame(v: [f64; 6]) -> topspin_core::kinematics::Pose {
+    topspin_core::kinematics::Pose::from_xyz_abc(
+        [v[0], v[1], v[2]].map(|x| x * 1e-3),
+        [v[3], v[4], v[5]].map(f64::to_radians),
+    )
 }
 
 pub(crate) fn parse_correction(s: &str) -> Result<Correction, String> {
@@ -131,6 +174,25 @@ pub fn run(a: MockKrcArgs) -> anyhow::Result<()> {
     }
     cfg.cycles = a.cycles;
     cfg.seed = a.seed;
+    let c = &mut cfg.controller;
+    if let Some(t) = a.tool_data {
+        c.arm.geometry.tool = frame(t);
+    }
+    if let Some(b) = a.base_data {
+        c.base = frame(b);
+    }
+    c.brakes = a.brakes;
+    let near = a.start_joints.map(topspin_core::kinematics::Joints::from_degrees).unwrap_or(c.start_joints);
+    match a.start_pose {
+        Some(p) => {
+            let pose = c.base.compose(&frame(p));
+            let q = c.arm.inverse_near(&pose, &near).map_err(|e| BadInput(format!("--start-pose: {e}")))?;
+            c.start = p;
+            c.start_joints = q;
+        }
+        None if a.start_joints.is_some() || a.tool_data.is_some() || a.base_data.is_some() => c.stand_at(near),
+        None => {}
+    }
     cfg.faults = Faults {
         drop: a.drop,
         delay: a.delay,

@@ -84,6 +84,10 @@ pub struct DemoConfig {
     /// The simulated tracker's: set, it streams from a thread of its own
     /// with these; default, from the calling thread as it is.
     pub tracker_thread: ThreadSpec,
+    /// Where the arm stands when RSI starts, joints A1..A6 in degrees
+    /// (`None`: home); the daemon takes it home at the commissioning speed
+    /// first, or holds where that way is unsafe.
+    pub start_joints: Option<[f64; 6]>,
 }
 
 /// After a live client connects, time given it to subscribe.
@@ -105,6 +109,7 @@ impl Default for DemoConfig {
             tracker_faults: None,
             mock_thread: ThreadSpec::default(),
             tracker_thread: ThreadSpec::default(),
+            start_joints: None,
         }
     }
 }
@@ -279,6 +284,9 @@ pub fn run_loopback(cfg: &DemoConfig, cal: &Calibration) -> std::io::Result<Loop
     }
     if let Some(n) = cfg.late_limit {
         mcfg.controller.late_limit = n;
+    }
+    if let Some(q) = cfg.start_joints {
+        mcfg.controller.stand_at(topspin_core::kinematics::Joints::from_degrees(q));
     }
     let mock = mock_krc::spawn(mcfg)?;
 

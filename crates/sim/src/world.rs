@@ -96,6 +96,9 @@ pub fn run_virtual(cfg: &DemoConfig, cal: &Calibration) -> VirtualRun {
     if let Some(n) = cfg.late_limit {
         controller.late_limit = n;
     }
+    if let Some(q) = cfg.start_joints {
+        controller.stand_at(topspin_core::kinematics::Joints::from_degrees(q));
+    }
     let mut pair = Pair::new(session, controller, Faults::default(), cfg.seed, START);
     if let Some(d) = cfg.answer_deadline {
         pair.timing.deadline = d;

@@ -149,9 +149,10 @@ fn an_unsafe_way_home_holds_with_zero_corrections_said_once() {
     let mut p = Pair::new(session(), c, Faults::default(), 11, T0);
     strikes(&mut p, 1500, 3);
     let events = p.take_events();
-    let refused: Vec<_> = events.iter().filter(|e| matches!(e, SessionEvent::StartRefused(_))).collect();
+    let refused: Vec<_> = events.iter().filter(|e| matches!(e, SessionEvent::StartRefused { .. })).collect();
     assert_eq!(refused.len(), 1, "said once: {refused:?}");
-    let SessionEvent::StartRefused(why) = refused[0] else { unreachable!() };
+    let SessionEvent::StartRefused { reason: why, from_mm, .. } = refused[0] else { unreachable!() };
+    assert!(*from_mm > 300.0, "names the offset: {from_mm} mm");
     assert!(matches!(why, StartRefused::WayHome(_)), "{why:?}");
     assert!(why.fix().contains("PTP to home in topspin_rsi.src"));
     let r = p.result();
@@ -279,8 +280,8 @@ fn another_tool_or_base_is_refused_at_the_first_request() {
     let mut p = Pair::new(session(), c, Faults::default(), 11, T0);
     assert_eq!(p.run(50), 50);
     let events = p.take_events();
-    let Some(SessionEvent::StartRefused(StartRefused::Frames(m))) =
-        events.iter().find(|e| matches!(e, SessionEvent::StartRefused(_))).copied()
+    let Some(SessionEvent::StartRefused { reason: StartRefused::Frames(m), .. }) =
+        events.iter().find(|e| matches!(e, SessionEvent::StartRefused { .. })).copied()
     else {
         panic!("not refused: {events:?}")
     };
@@ -294,8 +295,8 @@ fn another_tool_or_base_is_refused_at_the_first_request() {
     c.stand_at(q);
     let mut p = Pair::new(session(), c, Faults::default(), 11, T0);
     assert_eq!(p.run(10), 10);
-    let Some(SessionEvent::StartRefused(StartRefused::Frames(m))) =
-        p.take_events().iter().find(|e| matches!(e, SessionEvent::StartRefused(_))).copied()
+    let Some(SessionEvent::StartRefused { reason: StartRefused::Frames(m), .. }) =
+        p.take_events().iter().find(|e| matches!(e, SessionEvent::StartRefused { .. })).copied()
     else {
         panic!("not refused")
     };

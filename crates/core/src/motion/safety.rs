@@ -70,6 +70,15 @@ impl SafetyFilter {
         self.hi[..3].copy_from_slice(&hi);
     }
 
+    /// Follows a pose commanded past the filter (the way home, planned
+    /// within tighter bounds): its step becomes the filter's velocity.
+    pub fn track(&mut self, p: &Pose6) {
+        for i in 0..6 {
+            self.v[i] = (p[i] - self.p[i]) / self.dt;
+            self.p[i] = p[i];
+        }
+    }
+
     /// The last pose let through.
     pub fn pose(&self) -> Pose6 {
         self.p

@@ -294,7 +294,14 @@ pub enum SessionEvent {
     PhaseChanged(Phase),
     /// The start cannot be used (or, after a stop, the way home is
     /// unsafe): the session holds, nothing moves until RSI restarts.
-    StartRefused(StartRefused),
+    StartRefused {
+        /// Why.
+        reason: StartRefused,
+        /// How far the arm stands from home, mm …
+        from_mm: f64,
+        /// … and degrees.
+        from_deg: f64,
+    },
     /// The arm goes home at the commissioning speed.
     GoingHome {
         /// How far it stands from home, mm …
@@ -632,6 +639,7 @@ impl RsiSession {
             let t = self.setpoint_time(now, rob.ipoc);
             if !first && self.watch(&rob) {
                 self.arm_stopped();
+                self.step_stopped(t, &rob);
             } else {
                 self.take_plan();
                 match self.mode {
@@ -764,11 +772,12 @@ impl RsiSession {
     }
 
     /// Holds where the arm stands, said once.
-    fn refuse(&mut self, r: StartRefused) {
+    fn refuse(&mut self, reason: StartRefused) {
         self.mode = ArmMode::Held;
         self.homing = None;
         self.stats.starts_refused += 1;
-        self.push(SessionEvent::StartRefused(r));
+        let (d, a) = Pose::from_pose6(&self.last_command).distance(&Pose::from_pose6(&self.cfg.limits.home));
+        self.push(SessionEvent::StartRefused { reason, from_mm: d * 1e3, from_deg: a.to_degrees() });
     }
 
     /// The way home from joints `q` (commanded pose `p`), starting at `t`;
@@ -822,6 +831,7 @@ impl RsiSession {
             self.refuse(StartRefused::WayHome(WayHomeBlocked::StepTooLarge { mm: d * 1e3, deg: a.to_degrees() }));
             return;
         }
+        self.safety.track(&p);
         match self.cfg.correction {
             Correction::Cartesian => self.cartesian_correction(&p, &p, q),
             Correction::Axis => self.send_joints(q, &p),
@@ -859,6 +869,9 @@ impl RsiSession {
             let d = unwrap_near(rist[i], cmd[i]) - cmd[i];
             cmd[i] += d.clamp(-h.rate * dt, h.rate * dt);
         }
+        // Through the filter: a command that was moving brakes within the
+        // cell's limits before it turns onto the arm.
+        let (cmd, _) = self.safety.filter(&cmd);
         match self.cfg.correction {
             Correction::Cartesian => {
                 let arm = &self.cfg.limits.arm;

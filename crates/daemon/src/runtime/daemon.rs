@@ -161,13 +161,17 @@ pub enum LinkState {
     Silent = 3,
     /// The controller went silent with the bat at home (RSI ended there).
     SilentHome = 4,
+    /// The start was refused: held where the arm stands.
+    Held = 5,
 }
 
 /// The link's state after session event `e`, from `current` (`None`: no
 /// change).
 fn next_link(current: LinkState, e: &SessionEvent) -> Option<LinkState> {
     match e {
-        SessionEvent::Started { .. } => Some(LinkState::Home),
+        SessionEvent::Started { .. } | SessionEvent::Home => Some(LinkState::Home),
+        SessionEvent::GoingHome { .. } | SessionEvent::ArmStopped { .. } => Some(LinkState::Moving),
+        SessionEvent::StartRefused { .. } => Some(LinkState::Held),
         SessionEvent::RobotSilent if current == LinkState::Home => Some(LinkState::SilentHome),
         SessionEvent::RobotSilent => Some(LinkState::Silent),
         SessionEvent::PhaseChanged(Phase::Hold) => Some(LinkState::Home),
@@ -183,6 +187,7 @@ impl LinkState {
             2 => LinkState::Home,
             3 => LinkState::Silent,
             4 => LinkState::SilentHome,
+            5 => LinkState::Held,
             _ => LinkState::NoRobot,
         }
     }
@@ -413,6 +418,8 @@ impl Daemon {
                 // stopped before SIGTERM): it ended home.
                 LinkState::NoRobot | LinkState::SilentHome => break true,
                 LinkState::Silent => break home,
+                // Held where it stood (a refused start): nothing will move.
+                LinkState::Held => break false,
                 LinkState::Home => home = true,
                 LinkState::Moving => home = false,
             }
@@ -662,7 +669,23 @@ mod tests {
             Some(LinkState::Home)
         );
         assert_eq!(next_link(LinkState::Home, &SessionEvent::PhaseChanged(Phase::Approach)), Some(LinkState::Moving));
-        for s in [LinkState::NoRobot, LinkState::Moving, LinkState::Home, LinkState::Silent, LinkState::SilentHome] {
+        let going = SessionEvent::GoingHome { from_mm: 300.0, from_deg: 20.0, duration: Duration::from_millis(2000) };
+        assert_eq!(next_link(LinkState::Home, &going), Some(LinkState::Moving));
+        assert_eq!(next_link(LinkState::Moving, &SessionEvent::Home), Some(LinkState::Home));
+        let refused = SessionEvent::StartRefused {
+            reason: topspin_core::rsi::start::StartRefused::NoPose,
+            from_mm: 0.0,
+            from_deg: 0.0,
+        };
+        assert_eq!(next_link(LinkState::Home, &refused), Some(LinkState::Held));
+        for s in [
+            LinkState::NoRobot,
+            LinkState::Moving,
+            LinkState::Home,
+            LinkState::Silent,
+            LinkState::SilentHome,
+            LinkState::Held,
+        ] {
             assert_eq!(LinkState::from_u8(s as u8), s);
         }
     }

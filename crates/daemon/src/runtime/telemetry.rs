@@ -441,6 +441,33 @@ fn tally(s: &mut TelemetrySummary, e: &Telemetry, sink: &mut Option<Box<dyn Tele
                     s.controller_late = *delay;
                     tracing::warn!(target: "topspin::rsi", delay, "controller counted late answers");
                 }
+                SessionEvent::StartRefused { reason, from_mm, from_deg } => {
+                    tracing::error!(
+                        target: "topspin::rsi",
+                        reason = reason.key(),
+                        "RSI start refused, holding with zero corrections: the arm stands {from_mm:.0} mm and \
+                         {from_deg:.0}° from home; {reason}; {}",
+                        reason.fix()
+                    );
+                }
+                SessionEvent::GoingHome { from_mm, from_deg, duration } => {
+                    tracing::warn!(
+                        target: "topspin::rsi",
+                        "the arm stands {from_mm:.0} mm and {from_deg:.0}° from home: going home at the \
+                         commissioning speed ({:.1} s); no strokes until it is there",
+                        duration.as_secs_f64()
+                    );
+                }
+                SessionEvent::Home => tracing::info!(target: "topspin::rsi", "the arm is home and following: playing"),
+                SessionEvent::ArmStopped { error_mm, error_deg, stroke_abandoned } => {
+                    tracing::error!(
+                        target: "topspin::rsi",
+                        stroke_abandoned,
+                        "the arm stopped following its commands ({error_mm:.1} mm, {error_deg:.1}° from the servo \
+                         model; brakes, an operator stop, a KSS error or the load check): holding, no strokes; \
+                         home at the commissioning speed once it stands still"
+                    );
+                }
                 SessionEvent::Malformed(_)
                 | SessionEvent::SlowAnswer { .. }
                 | SessionEvent::IpocGap { .. }

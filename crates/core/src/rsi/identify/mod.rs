@@ -73,6 +73,13 @@ pub struct IdentifierConfig {
     pub home_mm: [f64; 3],
     /// The longest dead time fitted, cycles.
     pub max_dead_time_cycles: usize,
+    /// The arm (tool included) `RIst` is checked against at the first
+    /// request (`AIPos`'s forward kinematics), and the tolerance (mm,
+    /// degrees) past which the run is refused: the KRL program's TOOL_DATA
+    /// or BASE_DATA is not the calibration's.
+    pub arm: crate::kinematics::Arm,
+    /// See `arm`.
+    pub frames_tolerance: (f64, f64),
 }
 
 impl IdentifierConfig {
@@ -87,6 +94,8 @@ impl IdentifierConfig {
             cycle_ms,
             home_mm: c.robot.home.xyz_m.map(|x| x * 1e3),
             max_dead_time_cycles: (fit::MAX_DEAD_TIME_S * 1e3 / cycle_ms as f64).floor() as usize,
+            arm: c.robot.arm(),
+            frames_tolerance: (c.robot.start.frames_tolerance_mm, c.robot.start.frames_tolerance_deg),
         }
     }
 }
@@ -190,6 +199,10 @@ pub enum IdentifyError {
         /// The configured cycle, ms.
         cycle_ms: u32,
     },
+    /// `RIst` is not the forward kinematics of `AIPos` under the
+    /// calibration: another TOOL_DATA or BASE_DATA (the robot was not moved).
+    #[error("{0}")]
+    Frames(crate::rsi::start::FramesMismatch),
     /// The controller stopped before the excitation was done.
     #[error("the controller stopped sending after {cycles} of {expected} cycles")]
     Truncated {
@@ -266,6 +279,8 @@ pub struct Identifier {
     log: Vec<Cycle>,
     last_rx: Option<Instant>,
     stats: IdentifierStats,
+    /// The first request's tool/base mismatch, if any (nothing moved).
+    frames: Option<crate::rsi::start::FramesMismatch>,
 }
 
 impl Identifier {
@@ -293,6 +308,7 @@ impl Identifier {
             log,
             last_rx: None,
             stats: IdentifierStats::default(),
+            frames: None,
         })
     }
 
@@ -412,10 +428,19 @@ impl Identifier {
         let restarts = self.stats.restarts;
         self.stats =
             IdentifierStats { restarts, requests: 1, no_rist: rob.rist.is_none() as u64, ..Default::default() };
+        self.frames = None;
         match rob.rist {
             Some(p) => {
                 self.start = p;
                 self.state = IdentifierState::Exciting;
+                // Another TOOL or BASE than the calibration: do not move.
+                if let (Ok((pose, Some(q))), (mm, deg)) =
+                    (crate::rsi::start::read_start(&self.cfg.arm, Some(p), rob.aipos), self.cfg.frames_tolerance)
+                    && let Some(m) = crate::rsi::start::check_frames(&self.cfg.arm, &pose, &q, mm, deg)
+                {
+                    self.frames = Some(m);
+                    self.state = IdentifierState::Done;
+                }
             }
             // Nothing to measure with: do not move the robot.
             None => self.state = IdentifierState::Done,
@@ -528,6 +553,9 @@ impl Identifier {
         }
         if self.log.first().is_some_and(|c| c.rist.is_none()) {
             return Err(IdentifyError::NoRist);
+        }
+        if let Some(m) = self.frames {
+            return Err(IdentifyError::Frames(m));
         }
         let (trace, late) = self.trace();
         let cycles = trace.u.len();
