@@ -214,28 +214,51 @@ impl RobElement {
 impl RobFrame {
     /// Parses a `<Rob>` datagram. Never panics.
     pub fn parse(bytes: &[u8]) -> Result<Self, CodecError> {
+        match Self::parse_lenient(bytes)? {
+            (f, None) => Ok(f),
+            (_, Some(e)) => Err(e),
+        }
+    }
+
+    /// As [`Self::parse`], but an element whose values cannot be read (a
+    /// non-finite or missing number in `RIst`, `RSol`, `AIPos`, `ASPos` or
+    /// `Delay`) is left out and its error returned beside the frame: the
+    /// request still has an IPOC to answer. The XML's structure and the
+    /// IPOC must be sound.
+    pub fn parse_lenient(bytes: &[u8]) -> Result<(Self, Option<CodecError>), CodecError> {
         let mut s = Scanner::new(bytes);
         expect_root(&mut s, "Rob")?;
         let mut f = RobFrame::default();
         let mut ipoc = None;
+        let mut bad = None;
+        fn keep<T>(bad: &mut Option<CodecError>, r: Result<T, CodecError>) -> Option<T> {
+            r.map_err(|e| *bad.get_or_insert(e)).ok()
+        }
         while let Some(t) = s.next_token() {
             match t? {
                 Token::Start { name, attrs, empty } => match name {
-                    b"RIst" => f.rist = Some(KukaPose::from_array(attrs_named(attrs, "RIst", POSE_ATTRS)?)),
-                    b"RSol" => f.rsol = Some(KukaPose::from_array(attrs_named(attrs, "RSol", POSE_ATTRS)?)),
-                    b"AIPos" => f.aipos = Some(attrs_named(attrs, "AIPos", AXIS_ATTRS)?),
-                    b"ASPos" => f.aspos = Some(attrs_named(attrs, "ASPos", AXIS_ATTRS)?),
+                    b"RIst" => {
+                        f.rist = keep(&mut bad, attrs_named(attrs, "RIst", POSE_ATTRS)).map(KukaPose::from_array)
+                    }
+                    b"RSol" => {
+                        f.rsol = keep(&mut bad, attrs_named(attrs, "RSol", POSE_ATTRS)).map(KukaPose::from_array)
+                    }
+                    b"AIPos" => f.aipos = keep(&mut bad, attrs_named(attrs, "AIPos", AXIS_ATTRS)),
+                    b"ASPos" => f.aspos = keep(&mut bad, attrs_named(attrs, "ASPos", AXIS_ATTRS)),
                     b"Delay" => {
-                        let d =
-                            attr(attrs, b"D")?.ok_or(CodecError::MissingAttribute { element: "Delay", attr: "D" })?;
-                        f.delay = Some(integer(d, "Delay")?);
+                        let d = attr(attrs, b"D")?;
+                        f.delay = keep(
+                            &mut bad,
+                            d.ok_or(CodecError::MissingAttribute { element: "Delay", attr: "D" })
+                                .and_then(|d| integer(d, "Delay")),
+                        );
                     }
                     b"IPOC" => ipoc = Some(integer(text_of(&mut s, empty)?, "IPOC")?),
                     _ => {}
                 },
                 Token::End { name: b"Rob" } => {
                     f.ipoc = ipoc.ok_or(CodecError::MissingIpoc)?;
-                    return Ok(f);
+                    return Ok((f, bad));
                 }
                 _ => {}
             }

@@ -56,7 +56,7 @@ use heapless::Deque;
 
 use super::codec::{Axes, CodecError, KukaPose, RobFrame, SenFrame, check_text};
 use super::follow::FollowMonitor;
-use super::start::{StartRefused, check_frames, read_start};
+use super::start::{StartRefused, Verdict, assess};
 use crate::calib::Calibration;
 use crate::calib::robot::StartPolicy;
 use crate::kinematics::{Joints, Pose, Unreachable};
@@ -238,6 +238,8 @@ pub enum SessionEvent {
     },
     /// Bytes that are not a `<Rob>` datagram (not answered).
     Malformed(CodecError),
+    /// A `<Rob>` with a value that cannot be read (left out; answered).
+    BadValue(CodecError),
     /// IPOC jumped: cycles were missed.
     IpocGap {
         /// The IPOC one cycle after the last one.
@@ -364,6 +366,8 @@ pub struct SessionStats {
     /// Axis mode: cycles whose pose had no joints within the limits (the
     /// last correction held).
     pub axis_held: u64,
+    /// Requests with a value that could not be read (answered without it).
+    pub bad_values: u64,
     /// Starts refused (held until RSI restarts).
     pub starts_refused: u64,
     /// Ways home at the commissioning speed begun.
@@ -598,7 +602,7 @@ impl RsiSession {
     /// Handles one datagram received at `now`; writes the answer into
     /// `out` and returns its length.
     pub fn handle_datagram(&mut self, now: Instant, bytes: &[u8], out: &mut [u8]) -> Result<usize, SessionError> {
-        let rob = match RobFrame::parse(bytes) {
+        let (rob, bad) = match RobFrame::parse_lenient(bytes) {
             Ok(r) => r,
             Err(e) => {
                 self.stats.malformed += 1;
@@ -608,10 +612,15 @@ impl RsiSession {
         };
         self.stats.requests += 1;
         self.last_rx = Some(now);
+        if let Some(e) = bad {
+            // A value that cannot be read: the request is still answered.
+            self.stats.bad_values += 1;
+            self.push(SessionEvent::BadValue(e));
+        }
         let mut step = true;
         let first = self.state != SessionState::Running;
         if first {
-            self.begin(now, &rob);
+            self.begin(now, &rob, bad);
         } else {
             let expected = self.last_ipoc.wrapping_add(self.cfg.cycle_ms as u64);
             if rob.ipoc == self.last_ipoc {
@@ -689,41 +698,17 @@ impl RsiSession {
         }
     }
 
-    fn begin(&mut self, now: Instant, rob: &RobFrame) {
-        let home = self.cfg.limits.home;
-        let arm = self.cfg.limits.arm.clone();
-        let arm = &arm;
-        let near = self.cfg.limits.home_joints;
-        let st = self.cfg.start.clone();
-        let read = read_start(arm, rob.rist, rob.aipos);
-        // An unusable pose: hold at the (unknown) start with zero corrections.
-        let (pose, aipos) = match read {
-            Ok((p, q)) => (Some(p), q),
-            Err(_) => (None, None),
-        };
-        self.start = match pose {
-            Some(p) => {
-                let mut s = p.to_pose6();
-                for i in 3..6 {
-                    s[i] = unwrap_near(s[i], home[i]);
-                }
-                s
-            }
-            None => home,
-        };
-        let (from_mm, from_deg) = Pose::from_pose6(&self.start).distance(&Pose::from_pose6(&home));
-        let (from_mm, from_deg) = (from_mm * 1e3, from_deg.to_degrees());
-        let off_home = from_mm > st.home_tolerance_mm || from_deg > st.home_tolerance_deg;
+    fn begin(&mut self, now: Instant, rob: &RobFrame, bad: Option<CodecError>) {
         self.reset_clock();
         let t = self.setpoint_time(now, rob.ipoc);
+        let c = &self.cfg;
+        let start = assess(&c.limits, &c.start, &c.homing, rob.rist, rob.aipos, bad, t.as_secs_f64());
+        self.start = start.pose;
+        self.start_joints = start.joints;
         // The first setpoint is one cycle after the generator's start.
         let t_start = Instant(t.0.saturating_sub(self.cfg.cycle_ms as u64 * 1_000_000));
         self.generator.reset(t_start, self.start);
         self.safety.reset(self.start);
-        self.start_joints = match aipos {
-            Some(q) => q,
-            None => arm.inverse_near(&Pose::from_pose6(&self.start), &near).unwrap_or(near),
-        };
         self.last_sent_joints = self.start_joints;
         self.last_axis_correction = [0.0; 6];
         self.holding = false;
@@ -736,22 +721,17 @@ impl RsiSession {
         self.follow.reset(self.start_joints);
         self.fit_box();
         self.state = SessionState::Running;
-        self.push(SessionEvent::Started { ipoc: rob.ipoc, off_home });
-        let checked = read.and_then(|(p, q)| match q {
-            Some(q) => match check_frames(arm, &p, &q, st.frames_tolerance_mm, st.frames_tolerance_deg) {
-                Some(m) => Err(StartRefused::Frames(m)),
-                None => Ok(()),
-            },
-            None => Ok(()),
-        });
         self.mode = ArmMode::Playing;
-        match checked {
-            Err(r) => self.refuse(r),
-            Ok(()) if off_home => {
+        let st = &self.cfg.start;
+        let off_home = start.from_mm > st.home_tolerance_mm || start.from_deg > st.home_tolerance_deg;
+        self.push(SessionEvent::Started { ipoc: rob.ipoc, off_home });
+        match start.verdict {
+            Verdict::Refused(r) => self.refuse(r),
+            Verdict::GoHome(path) => {
                 let (q, p) = (self.start_joints, self.start);
-                self.go_home_from(t, q, p);
+                self.take_way_home(path, q, p);
             }
-            Ok(()) => self.push(SessionEvent::Home),
+            Verdict::Home => self.push(SessionEvent::Home),
         }
     }
 
@@ -783,27 +763,28 @@ impl RsiSession {
     /// The way home from joints `q` (commanded pose `p`), starting at `t`;
     /// held where it is unsafe.
     fn go_home_from(&mut self, t: Instant, q: Joints, p: Pose6) {
-        let arm = self.cfg.limits.arm.clone();
-        let arm = &arm;
-        let home = self.cfg.limits.home_joints;
-        match HomingPath::plan(arm, &self.cfg.homing, &self.start, &q, &home, t.as_secs_f64()) {
-            Ok(path) => {
-                let fk = arm.tcp(&q).to_pose6();
-                self.homing_offset =
-                    core::array::from_fn(|i| if i < 3 { p[i] - fk[i] } else { unwrap_near(p[i], fk[i]) - fk[i] });
-                let (d, a) = Pose::from_pose6(&p).distance(&Pose::from_pose6(&self.cfg.limits.home));
-                self.stats.ways_home += 1;
-                self.push(SessionEvent::GoingHome {
-                    from_mm: d * 1e3,
-                    from_deg: a.to_degrees(),
-                    duration: Duration((path.duration() * 1e9) as u64),
-                });
-                self.homing = Some(path);
-                self.mode = ArmMode::Homing;
-                self.last_joints_valid = false;
-            }
+        let c = &self.cfg;
+        match HomingPath::plan(&c.limits.arm, &c.homing, &self.start, &q, &c.limits.home_joints, t.as_secs_f64()) {
+            Ok(path) => self.take_way_home(path, q, p),
             Err(e) => self.refuse(StartRefused::WayHome(e)),
         }
+    }
+
+    /// Goes home on `path` from joints `q`, commanded at pose `p`.
+    fn take_way_home(&mut self, path: HomingPath, q: Joints, p: Pose6) {
+        let fk = self.cfg.limits.arm.tcp(&q).to_pose6();
+        self.homing_offset =
+            core::array::from_fn(|i| if i < 3 { p[i] - fk[i] } else { unwrap_near(p[i], fk[i]) - fk[i] });
+        let (d, a) = Pose::from_pose6(&p).distance(&Pose::from_pose6(&self.cfg.limits.home));
+        self.stats.ways_home += 1;
+        self.push(SessionEvent::GoingHome {
+            from_mm: d * 1e3,
+            from_deg: a.to_degrees(),
+            duration: Duration((path.duration() * 1e9) as u64),
+        });
+        self.homing = Some(path);
+        self.mode = ArmMode::Homing;
+        self.last_joints_valid = false;
     }
 
     /// One cycle of the way home: the path's joints (their pose, with the
@@ -1316,5 +1297,98 @@ mod tests {
         assert!(held[0] > 0.5);
         let (_, a) = cycle(&mut s, 3, rist, Some(aipos));
         assert!(a.is_some());
+    }
+
+    /// The first request of a run with these RIst and AIPos (written as
+    /// Rust prints them: NaN, inf); the events.
+    fn start_with(rist: Option<[f64; 6]>, aipos: Option<Axes>) -> (RsiSession, Vec<SessionEvent>, Option<KukaPose>) {
+        let mut s = session(Correction::Cartesian);
+        let mut out = [0u8; MAX_ANSWER_LEN];
+        let mut req = String::from("<Rob Type=\"KUKA\">");
+        if let Some(r) = rist {
+            req += &format!(
+                "<RIst X=\"{}\" Y=\"{}\" Z=\"{}\" A=\"{}\" B=\"{}\" C=\"{}\"/>",
+                r[0], r[1], r[2], r[3], r[4], r[5]
+            );
+        }
+        if let Some(a) = aipos {
+            req += &format!(
+                "<AIPos A1=\"{}\" A2=\"{}\" A3=\"{}\" A4=\"{}\" A5=\"{}\" A6=\"{}\"/>",
+                a[0], a[1], a[2], a[3], a[4], a[5]
+            );
+        }
+        req += "<IPOC>100</IPOC></Rob>";
+        let m = s.handle_datagram(Instant(T0), req.as_bytes(), &mut out).unwrap();
+        let rkorr = SenFrame::parse(&out[..m]).unwrap().rkorr;
+        let mut ev = Vec::new();
+        while let Some(e) = s.poll_event() {
+            ev.push(e);
+        }
+        (s, ev, rkorr)
+    }
+
+    fn refusal(ev: &[SessionEvent]) -> Option<StartRefused> {
+        ev.iter().find_map(|e| match e {
+            SessionEvent::StartRefused { reason, .. } => Some(*reason),
+            _ => None,
+        })
+    }
+
+    #[test]
+    fn an_unusable_start_is_answered_held_and_named() {
+        let (rist, aipos) = home();
+        let r = rist.to_array();
+        // Non-finite RIst, non-finite AIPos, AIPos past A1's limit, no RIst.
+        let mut nan = r;
+        nan[2] = f64::NAN;
+        let mut inf = aipos;
+        inf[3] = f64::INFINITY;
+        let mut past = aipos;
+        past[0] = 175.0;
+        for (rist, aipos, key) in [
+            (Some(nan), Some(aipos), "unreadable"),
+            (Some(r), Some(inf), "unreadable"),
+            (Some(r), Some(past), "joint_limit"),
+            (None, Some(aipos), "no_pose"),
+        ] {
+            let (mut s, ev, rkorr) = start_with(rist, aipos);
+            assert_eq!(rkorr, Some(KukaPose::default()), "answered with zero corrections");
+            assert_eq!(refusal(&ev).map(|r| r.key()), Some(key), "{ev:?}");
+            assert_eq!(s.arm_mode(), ArmMode::Held);
+            // Later requests: still zero, no more refusals, plans refused.
+            s.set_plan(plan(1, 1));
+            for k in 1..20 {
+                let (rk, _) = cycle(&mut s, k, home().0, Some(home().1));
+                assert_eq!(rk, Some(KukaPose::default()), "cycle {k}");
+            }
+            let mut later = Vec::new();
+            while let Some(e) = s.poll_event() {
+                later.push(e);
+            }
+            assert_eq!(refusal(&later), None, "said once");
+            assert!(later.contains(&SessionEvent::PlanRejected { seq: 1, reason: PlanRejected::NotHome }));
+            assert_eq!(s.stats().starts_refused, 1);
+            assert_eq!(s.stats().bad_values, (key == "unreadable") as u64, "counted");
+        }
+    }
+
+    #[test]
+    fn the_pose_of_the_design_example_is_refused_as_another_tool() {
+        // DESIGN §5.3's example: RIst {445, 0, 900, 0, 90, 0} with AIPos
+        // {0, -90, 90, 0, 0, 0}. Under calib/robot.toml's bat those joints
+        // put the TCP 280 mm further out: RIst is near the wrist, not the
+        // bat (another TOOL_DATA).
+        let rist = [445.0, 0.0, 900.0, 0.0, 90.0, 0.0];
+        let (_, ev, rkorr) = start_with(Some(rist), Some([0.0, -90.0, 90.0, 0.0, 0.0, 0.0]));
+        assert_eq!(rkorr, Some(KukaPose::default()));
+        let Some(StartRefused::Frames(m)) = refusal(&ev) else { panic!("{ev:?}") };
+        assert!(m.mm > 200.0, "{m:?}");
+        assert_eq!(m.likely, crate::rsi::start::LikelyFrame::Tool);
+        // Without AIPos the pose is taken as it is: 180° of turn from home
+        // is past POSCORR's 90° (and POSCORRMON's 100°): held, with the fix.
+        let (_, ev, rkorr) = start_with(Some(rist), None);
+        assert_eq!(rkorr, Some(KukaPose::default()));
+        let Some(r @ StartRefused::WayHome(_)) = refusal(&ev) else { panic!("{ev:?}") };
+        assert!(r.fix().contains("PTP to home in topspin_rsi.src"));
     }
 }

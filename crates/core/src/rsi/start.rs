@@ -14,9 +14,12 @@
 //! non-zero values (a tool length wrong, the flange as the tool, a base
 //! turned about its z axis).
 
+use crate::calib::robot::StartPolicy;
 use crate::kinematics::{Arm, Joints, LimitViolation, Pose};
-use crate::motion::homing::WayHomeBlocked;
-use crate::rsi::codec::{Axes, KukaPose};
+use crate::motion::homing::{HomingLimits, HomingPath, WayHomeBlocked};
+use crate::motion::limits::unwrap_near;
+use crate::motion::{MotionLimits, Pose6};
+use crate::rsi::codec::{Axes, CodecError, KukaPose};
 
 /// Which frame most likely differs from the calibration.
 #[derive(Copy, Clone, Debug, PartialEq, Eq)]
@@ -79,9 +82,9 @@ pub enum StartRefused {
     /// No `RIst` in the request (the SEND list must carry it).
     #[error("the first request has no RIst (add DEF_RIst to the SEND list)")]
     NoPose,
-    /// `RIst` or `AIPos` has a non-finite value.
-    #[error("the first request's {0} is not finite")]
-    NonFinite(&'static str),
+    /// `RIst` or `AIPos` has a non-finite or missing value.
+    #[error("the first request's {0} has a value that is missing or not finite")]
+    Unreadable(&'static str),
     /// `AIPos` outside the software limits.
     #[error("the first request's AIPos breaks {0}")]
     JointLimit(LimitViolation),
@@ -98,7 +101,7 @@ impl StartRefused {
     pub fn key(&self) -> &'static str {
         match self {
             StartRefused::NoPose => "no_pose",
-            StartRefused::NonFinite(_) => "non_finite",
+            StartRefused::Unreadable(_) => "unreadable",
             StartRefused::JointLimit(_) => "joint_limit",
             StartRefused::Frames(_) => "tool_or_base",
             StartRefused::WayHome(_) => "way_home",
@@ -114,20 +117,30 @@ impl StartRefused {
     }
 }
 
-/// `RIst` and `AIPos` as the session's units (m, rad), checked for use.
+/// `RIst` and `AIPos` as the session's units (m, rad), checked for use;
+/// `bad` is the request's unreadable element, if any
+/// ([`RobFrame::parse_lenient`](super::codec::RobFrame::parse_lenient)).
 pub fn read_start(
     arm: &Arm,
     rist: Option<KukaPose>,
     aipos: Option<Axes>,
+    bad: Option<CodecError>,
 ) -> Result<(Pose, Option<Joints>), StartRefused> {
+    let unreadable = |name: &'static str| matches!(bad, Some(CodecError::BadNumber { element } | CodecError::MissingAttribute { element, .. }) if element == name);
+    if unreadable("RIst") {
+        return Err(StartRefused::Unreadable("RIst"));
+    }
+    if unreadable("AIPos") {
+        return Err(StartRefused::Unreadable("AIPos"));
+    }
     let p = rist.ok_or(StartRefused::NoPose)?.to_array();
     if !p.iter().all(|x| x.is_finite()) {
-        return Err(StartRefused::NonFinite("RIst"));
+        return Err(StartRefused::Unreadable("RIst"));
     }
     let pose = Pose::from_xyz_abc([p[0], p[1], p[2]].map(|x| x * 1e-3), [p[3], p[4], p[5]].map(f64::to_radians));
     let joints = match aipos {
         None => None,
-        Some(a) if !a.iter().all(|x| x.is_finite()) => return Err(StartRefused::NonFinite("AIPos")),
+        Some(a) if !a.iter().all(|x| x.is_finite()) => return Err(StartRefused::Unreadable("AIPos")),
         Some(a) => {
             let q = Joints::from_degrees(a);
             // Position limits only: the singular wrist is the way home's matter.
@@ -178,6 +191,81 @@ pub fn check_frames(arm: &Arm, rist: &Pose, q: &Joints, tol_mm: f64, tol_deg: f6
     // program selects with every motion.
     let likely = if typed(&base_k) < typed(&tool_change) { LikelyFrame::Base } else { LikelyFrame::Tool };
     Some(FramesMismatch { mm, deg, likely, tool: kuka(&tool), base: base_k })
+}
+
+/// What a start allows.
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub enum Verdict {
+    /// Home within the tolerance: play.
+    Home,
+    /// Off home: this way home first, at the commissioning speed.
+    GoHome(HomingPath),
+    /// Hold where the arm stands, with zero corrections.
+    Refused(StartRefused),
+}
+
+/// The arm at the first request of a run, and what it allows.
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub struct Start {
+    /// `RIst` in B (m, rad; angles within π of home), or home where it is
+    /// unusable.
+    pub pose: Pose6,
+    /// `AIPos`, or the solution for `pose` nearest the home joints.
+    pub joints: Joints,
+    /// How far `pose` is from home, mm …
+    pub from_mm: f64,
+    /// … and degrees.
+    pub from_deg: f64,
+    /// What the session does.
+    pub verdict: Verdict,
+}
+
+/// The first request's `RIst`, `AIPos` (and unreadable element `bad`)
+/// against the cell: usable, the calibration's tool and base, home or the
+/// way home from there (starting at `t0` s). The RSI session's decision,
+/// and `topspin doctor`'s.
+pub fn assess(
+    lim: &MotionLimits,
+    policy: &StartPolicy,
+    homing: &HomingLimits,
+    rist: Option<KukaPose>,
+    aipos: Option<Axes>,
+    bad: Option<CodecError>,
+    t0: f64,
+) -> Start {
+    let home = lim.home;
+    let read = read_start(&lim.arm, rist, aipos, bad);
+    let pose = match &read {
+        Ok((p, _)) => {
+            let mut s = p.to_pose6();
+            for i in 3..6 {
+                s[i] = unwrap_near(s[i], home[i]);
+            }
+            s
+        }
+        Err(_) => home,
+    };
+    let joints = match &read {
+        Ok((_, Some(q))) => *q,
+        _ => lim.arm.inverse_near(&Pose::from_pose6(&pose), &lim.home_joints).unwrap_or(lim.home_joints),
+    };
+    let (d, a) = Pose::from_pose6(&pose).distance(&Pose::from_pose6(&home));
+    let (from_mm, from_deg) = (d * 1e3, a.to_degrees());
+    let verdict = match read {
+        Err(r) => Verdict::Refused(r),
+        Ok((p, Some(q)))
+            if let Some(m) =
+                check_frames(&lim.arm, &p, &q, policy.frames_tolerance_mm, policy.frames_tolerance_deg) =>
+        {
+            Verdict::Refused(StartRefused::Frames(m))
+        }
+        Ok(_) if from_mm <= policy.home_tolerance_mm && from_deg <= policy.home_tolerance_deg => Verdict::Home,
+        Ok(_) => match HomingPath::plan(&lim.arm, homing, &pose, &joints, &lim.home_joints, t0) {
+            Ok(path) => Verdict::GoHome(path),
+            Err(e) => Verdict::Refused(StartRefused::WayHome(e)),
+        },
+    };
+    Start { pose, joints, from_mm, from_deg, verdict }
 }
 
 #[cfg(test)]
@@ -243,17 +331,19 @@ mod tests {
     fn unusable_start_poses_are_named() {
         let (arm, q) = arm();
         let rist = Some(KukaPose::from_array([350.0, 0.0, 450.0, 180.0, 0.0, 0.0]));
-        assert_eq!(read_start(&arm, None, None), Err(StartRefused::NoPose));
+        assert_eq!(read_start(&arm, None, None, None), Err(StartRefused::NoPose));
         let nan = Some(KukaPose::from_array([f64::NAN, 0.0, 450.0, 180.0, 0.0, 0.0]));
-        assert_eq!(read_start(&arm, nan, None), Err(StartRefused::NonFinite("RIst")));
+        assert_eq!(read_start(&arm, nan, None, None), Err(StartRefused::Unreadable("RIst")));
+        let bad = Some(CodecError::BadNumber { element: "RIst" });
+        assert_eq!(read_start(&arm, None, None, bad), Err(StartRefused::Unreadable("RIst")));
         let mut a = q.degrees();
         a[2] = f64::INFINITY;
-        assert_eq!(read_start(&arm, rist, Some(a)), Err(StartRefused::NonFinite("AIPos")));
+        assert_eq!(read_start(&arm, rist, Some(a), None), Err(StartRefused::Unreadable("AIPos")));
         let mut a = q.degrees();
         a[0] = 171.0;
-        let Err(StartRefused::JointLimit(v)) = read_start(&arm, rist, Some(a)) else { panic!("A1 at 171°") };
+        let Err(StartRefused::JointLimit(v)) = read_start(&arm, rist, Some(a), None) else { panic!("A1 at 171°") };
         assert_eq!(v.axis, crate::kinematics::Axis::A1);
-        let (p, j) = read_start(&arm, rist, Some(q.degrees())).unwrap();
+        let (p, j) = read_start(&arm, rist, Some(q.degrees()), None).unwrap();
         assert!((p.position.x - 0.35).abs() < 1e-12 && j.unwrap().max_abs_diff(&q) < 1e-12);
     }
 }

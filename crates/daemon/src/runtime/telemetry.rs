@@ -469,6 +469,7 @@ fn tally(s: &mut TelemetrySummary, e: &Telemetry, sink: &mut Option<Box<dyn Tele
                     );
                 }
                 SessionEvent::Malformed(_)
+                | SessionEvent::BadValue(_)
                 | SessionEvent::SlowAnswer { .. }
                 | SessionEvent::IpocGap { .. }
                 | SessionEvent::AxisHeld { .. } => {
