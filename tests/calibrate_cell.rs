@@ -155,6 +155,47 @@ fn rsi_touches_of_the_mock_robot_recover_its_true_base() {
     assert!(j["rms_mm"].as_f64().unwrap() < 0.01, "{j}");
 }
 
+#[test]
+fn touches_in_another_base_are_refused_with_exit_2() {
+    // The KRL program's BASE_DATA is turned 2° about z from the robot's
+    // foot: RIst is not the kinematics of AIPos under calib/robot.toml.
+    let port = UdpSocket::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
+    let args = [
+        "calibrate",
+        "cell",
+        "--rsi",
+        "--bind",
+        &format!("127.0.0.1:{port}"),
+        "--touch",
+        "centre_robot_end",
+        "--touch",
+        "mark_a=1.37,0.35,0",
+        "--touch",
+        "mark_b=1.37,-0.35,0",
+        "--touch",
+        "mark_c=1.28,0.2,0",
+    ];
+    let mut child =
+        topspin().args(args).stdin(Stdio::piped()).stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().unwrap();
+    let mut cfg = MockKrcConfig::default_cell().unwrap();
+    cfg.sensor = format!("127.0.0.1:{port}").parse().unwrap();
+    cfg.bind = "127.0.0.1:0".parse().unwrap();
+    cfg.controller.late_limit = u64::MAX;
+    cfg.answer_deadline = topspin_core::time::Duration::from_millis(50);
+    cfg.controller.base = topspin_core::kinematics::Pose::from_xyz_abc([0.0; 3], [2f64.to_radians(), 0.0, 0.0]);
+    let q = cfg.controller.start_joints;
+    cfg.controller.stand_at(q);
+    std::thread::sleep(Duration::from_millis(300));
+    let mock = mock_krc::spawn(cfg).unwrap();
+    writeln!(child.stdin.take().unwrap()).unwrap();
+    let out = child.wait_with_output().unwrap();
+    mock.stop().unwrap();
+    assert_eq!(out.status.code(), Some(2), "{}", String::from_utf8_lossy(&out.stderr));
+    let err = String::from_utf8_lossy(&out.stderr);
+    let last = err.trim().lines().last().unwrap();
+    assert!(last.contains("refused at the first request") && last.contains("most likely BASE_DATA"), "{err}");
+}
+
 /// A touch: name, TCP in B (mm), the point's own table coordinates.
 type TouchRow = (String, [f64; 3], Option<[f64; 3]>);
 

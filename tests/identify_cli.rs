@@ -172,3 +172,23 @@ fn help_has_an_example() {
     let help = String::from_utf8_lossy(&out.stdout);
     assert!(help.contains("Example") && help.contains("topspin identify --axis all"), "{help}");
 }
+
+#[test]
+fn another_tool_is_refused_at_the_first_request_with_exit_2() {
+    // The KRL program runs a TOOL_DATA 30 mm longer than calib/robot.toml's
+    // bat: RIst is not the kinematics of AIPos, and nothing is moved.
+    let (out, mock) = identify_against_mock(&["--axis", "x", "--seconds", "3"], |c| {
+        c.controller.arm.geometry.tool.position.z += 0.03;
+        let q = c.controller.start_joints;
+        c.controller.stand_at(q);
+    });
+    assert_eq!(out.status.code(), Some(2), "{}", String::from_utf8_lossy(&out.stderr));
+    let err = String::from_utf8_lossy(&out.stderr);
+    let last = err.trim().lines().last().unwrap();
+    assert!(last.contains("refused at the first request") && last.contains("most likely TOOL_DATA"), "{err}");
+    assert!(last.contains("30.0 mm"), "{last}");
+    let r: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert!(r["error"].as_str().unwrap().contains("TOOL_DATA"), "{r}");
+    let start = mock.path.first().unwrap().commanded;
+    assert!(mock.path.iter().all(|s| s.commanded == start), "the robot was not moved");
+}

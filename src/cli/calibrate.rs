@@ -132,7 +132,7 @@ fn cell_cmd(a: CellArgs) -> anyhow::Result<()> {
         Bounds { max_rms_m: a.max_rms_mm * 1e-3, max_worst_m: a.max_worst_mm * 1e-3, max_tilt_deg: a.max_tilt_deg };
     let (touches, file_offset_mm) = match (&a.points, a.rsi) {
         (Some(path), _) => read_points(path, &calib.table)?,
-        (None, true) => (touch_over_rsi(&a, &calib.table)?, None),
+        (None, true) => (touch_over_rsi(&a, &calib)?, None),
         (None, false) => return Err(bad("no touches: give --points FILE or --rsi (see --help)")),
     };
     let offset_mm = a.contact_offset_mm.or(file_offset_mm).unwrap_or(0.0);
@@ -337,8 +337,8 @@ fn touch_list(args: &[String], table: &Table) -> anyhow::Result<Vec<(String, [f6
 }
 
 /// Reads each `--touch` point over RSI: Enter with the bat on the point.
-fn touch_over_rsi(a: &CellArgs, table: &Table) -> anyhow::Result<Vec<Touch>> {
-    let points = touch_list(&a.touch, table)?;
+fn touch_over_rsi(a: &CellArgs, calib: &Calibration) -> anyhow::Result<Vec<Touch>> {
+    let points = touch_list(&a.touch, &calib.table)?;
     if a.samples == 0 || a.samples > 2500 {
         return Err(bad(format!("--samples {}: must be 1 to 2500", a.samples)));
     }
@@ -371,13 +371,31 @@ fn touch_over_rsi(a: &CellArgs, table: &Table) -> anyhow::Result<Vec<Touch>> {
             if line.trim() == "s" {
                 break;
             }
-            let samples = match listener.take(a.samples, timeout) {
+            let requests = match listener.take_requests(a.samples, timeout) {
                 Ok(s) => s,
                 Err(e) => {
                     eprintln!("{name}: {e}; try again");
                     continue;
                 }
             };
+            // The touches are RIst: in the KRL program's TOOL and BASE,
+            // which must be the calibration's (checked where AIPos comes).
+            if let Some((p, Some(q))) = requests.first() {
+                let r = &calib.robot;
+                let arm = r.arm();
+                if let Ok((pose, Some(joints))) = topspin_core::rsi::start::read_start(&arm, Some(*p), Some(*q), None)
+                    && let Some(m) = topspin_core::rsi::start::check_frames(
+                        &arm,
+                        &pose,
+                        &joints,
+                        r.start.frames_tolerance_mm,
+                        r.start.frames_tolerance_deg,
+                    )
+                {
+                    return Err(bad(format!("refused at the first request: {m}")));
+                }
+            }
+            let samples: Vec<[f64; 3]> = requests.iter().map(|(p, _)| [p.x, p.y, p.z]).collect();
             match cell::average_still(&samples, a.max_spread_mm) {
                 Ok(m) => {
                     eprintln!("{name}: TCP at ({:.2}, {:.2}, {:.2}) mm in B", m[0], m[1], m[2]);

@@ -28,6 +28,16 @@ pub struct DoctorArgs {
     /// Skip the jitter probe (reported as a warning).
     #[arg(long)]
     pub no_probe: bool,
+    /// Also listen this long (s) on network.rsi_bind for the controller's
+    /// RSI requests (answered with zero corrections: nothing moves) and
+    /// judge the arm's start: home, off home (the daemon goes home at the
+    /// commissioning speed), or refused (another TOOL_DATA/BASE_DATA, an
+    /// unsafe way home).
+    #[arg(long, value_name = "S")]
+    pub robot_wait: Option<f64>,
+    /// Calibration folder for --robot-wait (default: the configuration's calib.dir).
+    #[arg(long, value_name = "DIR")]
+    pub calib: Option<PathBuf>,
 }
 
 const AFTER_HELP: &str = "\
@@ -46,6 +56,9 @@ Checks (pass / warn / fail; nothing needs root, nothing is changed):
                  (blocking wait) or off it (busy_poll)
   swap           no swap, or memory locking allowed
   time_sync      the kernel clock is synchronised (chrony, ntpd, systemd-timesyncd, ptp4l)
+  robot_start    (--robot-wait S only) the controller's first RSI request: the arm home (pass), off home
+                 with a clear way home at commissioning speed (warn), RIst not the kinematics of AIPos
+                 under calib/robot.toml's tool and base, or an unsafe way home (fail)
   jitter_probe   a thread on the RSI core at the RSI priority sleeps to absolute 4 ms deadlines
                  (clock_nanosleep) for --probe-seconds; wake-up lateness median / p99 / p99.9 / max:
                  pass  p99.9 <= 100 us (DESIGN §9's RSI answer budget) and max <= 1 ms (a quarter cycle)
@@ -68,7 +81,17 @@ pub fn run(a: DoctorArgs) -> anyhow::Result<()> {
         return Err(BadInput(format!("--probe-seconds {}: must be between 0.01 and 3600", a.probe_seconds)).into());
     }
     let cfg = DaemonConfig::load(a.config.as_deref()).map_err(|e| BadInput(e.to_string()))?;
-    let report = doctor::diagnose(&Host::live(), &cfg, (!a.no_probe).then_some(a.probe_seconds));
+    let mut report = doctor::diagnose(&Host::live(), &cfg, (!a.no_probe).then_some(a.probe_seconds));
+    if let Some(w) = a.robot_wait {
+        if !(w.is_finite() && (0.01..=600.0).contains(&w)) {
+            return Err(BadInput(format!("--robot-wait {w}: must be between 0.01 and 600")).into());
+        }
+        let dir = a.calib.as_deref().or(cfg.calib.dir());
+        let cal = topspin_core::calib::Calibration::load(dir).map_err(|e| BadInput(e.to_string()))?;
+        let mut checks = report.checks;
+        checks.push(doctor::robot::check(&cfg, &cal, w));
+        report = doctor::Report::new(checks);
+    }
     if a.json {
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {

@@ -18,7 +18,7 @@ use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 use std::sync::mpsc::{Receiver, RecvTimeoutError, Sender, channel};
 use std::thread::JoinHandle;
 
-use topspin_core::rsi::codec::{KukaPose, RobFrame, SenFrame};
+use topspin_core::rsi::codec::{Axes, KukaPose, RobFrame, SenFrame};
 
 use crate::rsi_server::MAX_REQUEST_LEN;
 
@@ -50,7 +50,7 @@ pub enum TouchError {
 }
 
 enum Sample {
-    Rist(KukaPose),
+    Rist(KukaPose, Option<Axes>),
     NoRist,
 }
 
@@ -69,7 +69,7 @@ pub struct TouchListener {
 impl std::fmt::Debug for Sample {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
-            Sample::Rist(p) => write!(f, "Rist({p:?})"),
+            Sample::Rist(p, a) => write!(f, "Rist({p:?}, {a:?})"),
             Sample::NoRist => write!(f, "NoRist"),
         }
     }
@@ -110,6 +110,16 @@ impl TouchListener {
     /// The TCP positions (`RIst` X, Y, Z, mm) of the next `n` requests
     /// that arrive after this call, waiting at most `timeout` in all.
     pub fn take(&mut self, n: usize, timeout: std::time::Duration) -> Result<Vec<[f64; 3]>, TouchError> {
+        Ok(self.take_requests(n, timeout)?.iter().map(|(p, _)| [p.x, p.y, p.z]).collect())
+    }
+
+    /// `RIst` and `AIPos` (where the SEND list has it) of the next `n`
+    /// requests that arrive after this call, waiting at most `timeout`.
+    pub fn take_requests(
+        &mut self,
+        n: usize,
+        timeout: std::time::Duration,
+    ) -> Result<Vec<(KukaPose, Option<Axes>)>, TouchError> {
         while self.samples.try_recv().is_ok() {} // a timed-out take's leftovers
         self.drain.store(true, Ordering::Release);
         self.wanted.store(n, Ordering::Release);
@@ -124,7 +134,7 @@ impl TouchListener {
             let wait = left.min(step);
             left -= wait;
             match self.samples.recv_timeout(wait) {
-                Ok(Sample::Rist(p)) => out.push([p.x, p.y, p.z]),
+                Ok(Sample::Rist(p, a)) => out.push((p, a)),
                 Ok(Sample::NoRist) => {
                     self.wanted.store(0, Ordering::Release);
                     return Err(TouchError::NoRist);
@@ -173,7 +183,7 @@ fn answer(socket: &UdpSocket, sentype: &str, rx: &[u8], from: SocketAddr) -> io:
             Err(e) => return Err(e),
         }
     }
-    Ok(Some(rob.rist.map_or(Sample::NoRist, Sample::Rist)))
+    Ok(Some(rob.rist.map_or(Sample::NoRist, |p| Sample::Rist(p, rob.aipos))))
 }
 
 fn answer_loop(socket: &UdpSocket, sentype: &str, tx: &Sender<Sample>, shared: Shared) -> io::Result<()> {

@@ -169,3 +169,27 @@ fn returns_over_seeds() {
         median(&mut tracking)
     );
 }
+
+#[test]
+fn an_arm_that_starts_off_home_is_taken_home_first_and_then_plays() {
+    // RSI starts with the arm where a KRL program left it (A1 +30°, the
+    // wrist turned): the session takes it home at the commissioning speed,
+    // refuses the plans meanwhile, and hits the balls that come after.
+    let cal = Calibration::default_cell();
+    let home = cal.robot.home_joints(&cal.robot.arm()).unwrap().degrees();
+    let off = [30.0, -5.0, 5.0, 10.0, 20.0, -30.0];
+    let cfg = DemoConfig {
+        balls: 8,
+        seed: 4,
+        start_joints: Some(core::array::from_fn(|i| home[i] + off[i])),
+        ..DemoConfig::default()
+    };
+    let r = run_virtual(&cfg, &cal);
+    assert!(r.mock.stopped.is_none(), "{}", summary(&r));
+    assert_eq!((r.mock.poscorr_clamped, r.mock.rates_over), (0, 0), "{}", summary(&r));
+    assert_eq!(r.session.ways_home, 1);
+    assert_eq!(r.session.arm_stops, 0);
+    // The way home takes about 2.6 s: the first two balls come before it ends.
+    let later: Vec<_> = r.per_ball.iter().filter(|b| b.reachable).skip(2).collect();
+    assert!(!later.is_empty() && later.iter().filter(|b| b.hit).count() + 1 >= later.len(), "{}", summary(&r));
+}

@@ -322,12 +322,12 @@ impl StrokeGenerator {
         self.go_home();
     }
 
-    /// The box strokes keep to (x, y, z in B, m): the workspace, or less
-    /// of it where the controller's correction limits end sooner (a start
-    /// off home, `rsi::session`).
-    pub fn set_box(&mut self, lo: [f64; 3], hi: [f64; 3]) {
-        self.lim.lo[..3].copy_from_slice(&lo);
-        self.lim.hi[..3].copy_from_slice(&hi);
+    /// The box strokes keep to (position and orientation in B): the
+    /// workspace, or less of it where the controller's correction limits
+    /// end sooner (a start off home, `rsi::session`).
+    pub fn set_box(&mut self, lo: Pose6, hi: Pose6) {
+        self.lim.lo = lo;
+        self.lim.hi = hi;
     }
 
     /// The current phase.

@@ -63,11 +63,11 @@ impl SafetyFilter {
         self.v = [0.0; 6];
     }
 
-    /// The box's translation (x, y, z, m): the workspace, or less of it
+    /// The box (position and orientation): the workspace, or less of it
     /// where the controller's correction limits end sooner.
-    pub fn set_box(&mut self, lo: [f64; 3], hi: [f64; 3]) {
-        self.lo[..3].copy_from_slice(&lo);
-        self.hi[..3].copy_from_slice(&hi);
+    pub fn set_box(&mut self, lo: Pose6, hi: Pose6) {
+        self.lo = lo;
+        self.hi = hi;
     }
 
     /// Follows a pose commanded past the filter (the way home, planned

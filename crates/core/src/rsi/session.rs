@@ -736,16 +736,29 @@ impl RsiSession {
     }
 
     /// The stroke box: the workspace within what POSCORR lets through from
-    /// this start (the same box when the start is home).
+    /// this start, per axis and in total (POSCORR's rotation and
+    /// POSCORRMON's totals, as root sums of squares over the box's farthest
+    /// corner; the box shrinks about the start until they hold). The same
+    /// box when the start is home (`robot.toml` validates it).
     fn fit_box(&mut self) {
         let h = &self.cfg.homing;
-        let mut lo = [0.0; 3];
-        let mut hi = [0.0; 3];
-        lo.copy_from_slice(&self.cfg.limits.lo[..3]);
-        hi.copy_from_slice(&self.cfg.limits.hi[..3]);
+        let (mut lo, mut hi) = (self.cfg.limits.lo, self.cfg.limits.hi);
+        let s = self.start;
         for i in 0..3 {
-            lo[i] = lo[i].max(self.start[i] + h.poscorr_lower_mm[i] * 1e-3);
-            hi[i] = hi[i].min(self.start[i] + h.poscorr_upper_mm[i] * 1e-3).max(lo[i]);
+            lo[i] = lo[i].max(s[i] + h.poscorr_lower_mm[i] * 1e-3);
+            hi[i] = hi[i].min(s[i] + h.poscorr_upper_mm[i] * 1e-3).max(lo[i]);
+        }
+        // Translation (m) and rotation (rad) totals, 1 % inside the limits.
+        let totals = [(0..3, h.mon_trans_mm * 1e-3), (3..6, h.poscorr_rot_deg.min(h.mon_rot_deg).to_radians())];
+        for (axes, limit) in totals {
+            let far = axes.clone().map(|i| (s[i] - lo[i]).abs().max((hi[i] - s[i]).abs()).powi(2)).sum::<f64>().sqrt();
+            let k = 0.99 * limit / far;
+            if far > 0.0 && k < 1.0 {
+                for i in axes {
+                    lo[i] = lo[i].max(s[i] - k * (s[i] - lo[i]).abs());
+                    hi[i] = hi[i].min(s[i] + k * (hi[i] - s[i]).abs()).max(lo[i]);
+                }
+            }
         }
         self.generator.set_box(lo, hi);
         self.safety.set_box(lo, hi);

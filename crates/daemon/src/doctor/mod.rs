@@ -30,6 +30,7 @@ pub mod cpu;
 pub mod host;
 pub mod net;
 pub mod probe;
+pub mod robot;
 pub mod rt;
 pub mod sysfs;
 pub mod system;
