@@ -51,13 +51,12 @@ fn malformed_requests_never_crash_the_session() {
     let cal = Calibration::default_cell();
     let mut s = RsiSession::new(SessionConfig::from_calibration(&cal, "ImFree")).unwrap();
     let mut out = [0u8; MAX_ANSWER_LEN];
-    let bad: [&[u8]; 8] = [
+    let bad: [&[u8]; 7] = [
         b"",
         b"<Rob>",
         b"<Rob><IPOC>x</IPOC></Rob>",
         b"<Sen Type=\"ImFree\"><IPOC>1</IPOC></Sen>",
         b"\xff\xfe<Rob",
-        b"<Rob><RIst X=\"1\"/><IPOC>1</IPOC></Rob>",
         b"<Rob><IPOC>99999999999999999999999</IPOC></Rob>",
         b"<<<<>>>>",
     ];
@@ -65,6 +64,12 @@ fn malformed_requests_never_crash_the_session() {
         assert!(s.handle_datagram(Instant(k as u64), b, &mut out).is_err());
     }
     assert_eq!(s.stats().malformed, bad.len() as u64);
+    // A request whose RIst cannot be read still has an IPOC: answered
+    // (the controller needs it), the value counted, the start held.
+    let n = s.handle_datagram(Instant(8), b"<Rob><RIst X=\"1\"/><IPOC>1</IPOC></Rob>", &mut out).unwrap();
+    assert!(std::str::from_utf8(&out[..n]).unwrap().contains("<IPOC>1</IPOC>"));
+    assert_eq!((s.stats().malformed, s.stats().bad_values), (bad.len() as u64, 1));
+    assert_eq!(s.arm_mode(), topspin_core::rsi::session::ArmMode::Held);
     // And it still answers a good one afterwards.
     let n = s.handle_datagram(Instant(10), b"<Rob Type=\"KUKA\"><IPOC>5</IPOC></Rob>", &mut out).unwrap();
     assert!(std::str::from_utf8(&out[..n]).unwrap().contains("<IPOC>5</IPOC>"));

@@ -2,7 +2,10 @@
 //! (4 ms) and a full-rate simulated tracker stream for a set duration, with
 //! an optional CPU hog; reports the two latency histograms (RSI answer,
 //! observation → plan) and the late RSI answers. `--layout` says where the
-//! threads run ([`super::bench_layout`]).
+//! threads run ([`super::bench_layout`]). `--floor` then runs the floor
+//! ([`topspin_daemon::rsi_floor`]: the IPOC copied into a constant answer)
+//! on the RSI thread's core and priority against the same mock for as
+//! long, and gives each RSI answer figure as a ratio over it.
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -13,10 +16,12 @@ use serde_json::json;
 use super::BadInput;
 use super::bench_layout::{self, HELPER_PRIORITY, Layout, Placement};
 use topspin_core::calib::Calibration;
+use topspin_daemon::rsi_floor::FloorServer;
 use topspin_daemon::rsi_server::WaitStrategy;
 use topspin_daemon::runtime::daemon::ThreadSpec;
 use topspin_daemon::runtime::rt::{self, RtRefused, RtWarning};
 use topspin_sim::demo::{DemoConfig, Latencies, run_loopback};
+use topspin_sim::mock_krc::{self, MockKrcConfig};
 use topspin_sim::probe;
 
 #[derive(Debug, Subcommand)]
@@ -28,6 +33,7 @@ pub enum BenchCommand {
 const LATENCY_HELP: &str = "\
 Examples:
   topspin bench latency --duration 600 --load 1            # the shared layout: any core, normal scheduling
+  topspin bench latency --duration 30 --floor             # and the floor for 30 s: each RSI figure over it
   sudo topspin bench latency --layout dedicated --duration 600 --json
                                                            # a core and SCHED_FIFO each for RSI, estimator,
                                                            # ingest, mock KR C4 and tracker (6 physical cores)
@@ -68,6 +74,66 @@ pub struct LatencyArgs {
     /// With --live: no built-in client (the server idles unless Foxglove connects).
     #[arg(long)]
     pub no_live_client: bool,
+    /// Then, for as long, the floor against the same mock: a server that
+    /// only copies the IPOC into a constant answer, on the RSI thread's
+    /// core, priority and wait; the RSI answer figures as ratios over it.
+    #[arg(long)]
+    pub floor: bool,
+}
+
+/// The floor's answer time (recvfrom returned → sendto returned), µs, and
+/// the mock's counters, for `seconds` against a fresh mock KR C4.
+fn floor_phase(cfg: &DemoConfig, seconds: f64) -> anyhow::Result<(FloorLatency, u64, u64, Vec<RtWarning>)> {
+    let mut server = FloorServer::bind("127.0.0.1:0".parse().expect("literal"), cfg.runtime.rsi_wait)?;
+    let addr = server.local_addr()?;
+    let spec = cfg.runtime.rsi;
+    let priority = spec.priority.filter(|_| cfg.runtime.realtime);
+    let stop = Arc::new(AtomicBool::new(false));
+    let s = stop.clone();
+    let thread = std::thread::spawn(move || {
+        let refused = rt::setup_current("rsi-floor", spec.core, priority);
+        server.run(&s).map(|()| (server, refused))
+    });
+    let mut mcfg = MockKrcConfig::default_cell().map_err(|e| anyhow::anyhow!("{e}"))?;
+    mcfg.sensor = addr;
+    mcfg.bind = "127.0.0.1:0".parse().expect("literal");
+    mcfg.thread = cfg.mock_thread;
+    let mock = mock_krc::spawn(mcfg)?;
+    std::thread::sleep(std::time::Duration::from_secs_f64(seconds));
+    let m = mock.stop()?;
+    stop.store(true, Ordering::Relaxed);
+    let (server, mut refused) = thread.join().map_err(|_| anyhow::anyhow!("floor thread panicked"))??;
+    refused.extend(m.rt_warnings.iter().cloned());
+    Ok((FloorLatency::of(&server.answer_ns), m.cycles, m.late, refused))
+}
+
+/// Quantiles of the floor's answer time, µs.
+#[derive(Copy, Clone, Debug, serde::Serialize)]
+struct FloorLatency {
+    p50: f64,
+    p99: f64,
+    p999: f64,
+    max: f64,
+    n: u64,
+}
+
+impl FloorLatency {
+    fn of(h: &hdrhistogram::Histogram<u64>) -> Self {
+        let us = |ns: u64| ns as f64 * 1e-3;
+        FloorLatency {
+            p50: us(h.value_at_quantile(0.5)),
+            p99: us(h.value_at_quantile(0.99)),
+            p999: us(h.value_at_quantile(0.999)),
+            max: us(h.max()),
+            n: h.len(),
+        }
+    }
+
+    /// `l` (µs) over the floor, per quantile.
+    fn ratios(&self, l: &topspin_daemon::runtime::telemetry::Latency) -> serde_json::Value {
+        let r = |x: u64, f: f64| if f > 0.0 { (x as f64 / f * 100.0).round() / 100.0 } else { f64::NAN };
+        json!({ "p50": r(l.p50, self.p50), "p99": r(l.p99, self.p99), "p999": r(l.p999, self.p999) })
+    }
 }
 
 pub fn run(cmd: BenchCommand) -> anyhow::Result<()> {
@@ -196,6 +262,11 @@ fn latency(a: LatencyArgs) -> anyhow::Result<()> {
         }
     }
     let r = run_loopback(&cfg, &Calibration::default_cell());
+    // The floor under the same load and placement, before the hogs stop.
+    let floor = match (&r, a.floor) {
+        (Ok(_), true) => Some(floor_phase(&cfg, a.duration)),
+        _ => None,
+    };
     stop.store(true, Ordering::Relaxed);
     for h in hogs {
         let _ = h.join();
@@ -208,6 +279,7 @@ fn latency(a: LatencyArgs) -> anyhow::Result<()> {
         None => None,
     };
     let r = r?;
+    let floor = floor.transpose()?;
     let live_json = seen.as_ref().map(|s| {
         json!({
             "messages": s.messages(),
@@ -226,8 +298,12 @@ fn latency(a: LatencyArgs) -> anyhow::Result<()> {
         ("mock-krc", cfg.mock_thread),
         ("tracker", cfg.tracker_thread),
     ];
+    let floor_refused = floor.as_ref().map(|f| f.3.as_slice()).unwrap_or_default();
     let refused: Vec<&RtWarning> =
-        r.daemon.warnings.iter().chain(&r.mock.rt_warnings).chain(&r.tracker_warnings).collect();
+        r.daemon.warnings.iter().chain(&r.mock.rt_warnings).chain(&r.tracker_warnings).chain(floor_refused).collect();
+    let floor_json = floor.as_ref().map(|(f, cycles, late, _)| {
+        json!({ "answer_us": f, "rsi_cycles": cycles, "late_rsi_answers": late, "rsi_answer_over_floor": f.ratios(&lat.rsi_answer) })
+    });
     let got = obtained(&threads, &refused);
     if a.json {
         println!(
@@ -249,6 +325,7 @@ fn latency(a: LatencyArgs) -> anyhow::Result<()> {
                 "live_client": live_json,
                 "telemetry_dropped": r.daemon.telemetry.telemetry_dropped,
                 "latency_us": lat,
+                "floor": floor_json,
                 "warnings": r.daemon.warnings.iter().map(|w| w.to_string()).collect::<Vec<_>>(),
             })
         );
@@ -261,6 +338,14 @@ fn latency(a: LatencyArgs) -> anyhow::Result<()> {
     println!("latency µs          p50    p99  p99.9    max");
     for (name, l) in [("RSI answer", lat.rsi_answer), ("observation→plan", lat.obs_to_plan)] {
         println!("{name:16} {:6} {:6} {:6} {:6}", l.p50, l.p99, l.p999, l.max);
+    }
+    if let Some((f, cycles, late, _)) = &floor {
+        println!(
+            "{:16} {:6.1} {:6.1} {:6.1} {:6.1}   ({cycles} cycles, {late} late)",
+            "floor", f.p50, f.p99, f.p999, f.max
+        );
+        let x = f.ratios(&lat.rsi_answer);
+        println!("RSI answer over the floor: p50 {}×, p99 {}×, p99.9 {}×", x["p50"], x["p99"], x["p999"]);
     }
     if let Some(s) = &seen {
         println!("live client ({}): {} messages", s.server_name, s.messages());

@@ -24,6 +24,7 @@ pub mod clock;
 pub mod config;
 pub mod doctor;
 pub mod record;
+pub mod rsi_floor;
 pub mod rsi_identify;
 pub mod rsi_server;
 pub mod runtime;
