@@ -57,26 +57,6 @@ fn largest_steps(path: &[PathSample], start: [f64; 6]) -> (f64, f64) {
     (dp, da)
 }
 
-/// Runs the strike stream for `n` cycles from now; the plans committed.
-fn strikes(p: &mut Pair, n: u64, seed: u64) -> Vec<topspin_core::plan::StrikePlan> {
-    let start = p.now();
-    let end = start + Duration::from_millis(n * 4);
-    let mut finals = Vec::new();
-    for r in strike_stream(seed, start, end) {
-        while p.now() < r.plan.made_at {
-            p.step().expect("RSI running");
-        }
-        p.publish(r.plan);
-        if r.committed {
-            finals.push(r.plan);
-        }
-    }
-    while p.now() < end {
-        p.step().expect("RSI running");
-    }
-    finals
-}
-
 #[test]
 fn an_arm_off_home_goes_home_at_the_commissioning_speed_then_plays() {
     let c = standing_off_home([30.0, -5.0, 5.0, 10.0, 20.0, -30.0]);
@@ -85,7 +65,7 @@ fn an_arm_off_home_goes_home_at_the_commissioning_speed_then_plays() {
     assert!(from > 0.15 && turn.to_degrees() > 25.0, "{from} m, {}°", turn.to_degrees());
     let mut p = Pair::new(session(), c, Faults::default(), 11, T0);
     // A ball's plans arrive from the first cycle on: refused until home.
-    let finals = strikes(&mut p, 4000, 5);
+    let finals = p.run_strikes(5, 4000);
     let r = p.result();
     assert!(r.stopped.is_none(), "{:?}", r.stopped.map(|s| s.to_string()));
     assert_eq!((r.poscorr_clamped, r.rates_over), (0, 0));
@@ -147,7 +127,7 @@ fn an_unsafe_way_home_holds_with_zero_corrections_said_once() {
     let c = standing_off_home([100.0, 0.0, 0.0, 0.0, 0.0, 0.0]);
     let start = c.start;
     let mut p = Pair::new(session(), c, Faults::default(), 11, T0);
-    strikes(&mut p, 1500, 3);
+    p.run_strikes(3, 1500);
     let events = p.take_events();
     let refused: Vec<_> = events.iter().filter(|e| matches!(e, SessionEvent::StartRefused { .. })).collect();
     assert_eq!(refused.len(), 1, "said once: {refused:?}");
@@ -247,7 +227,7 @@ fn brakes_mid_stroke_abandon_the_stroke_and_nothing_jumps_when_they_open() {
     // The session goes on: the balls whose plans began after it was home
     // again are met as in the same run without the brakes.
     let mut calm = Pair::new(session(), controller(), Faults::default(), 11, T0);
-    strikes(&mut calm, 3000, 7);
+    calm.run_strikes(7, 3000);
     let calm = calm.result();
     let later: Vec<(f64, f64)> = finals
         .iter()
@@ -263,7 +243,7 @@ fn the_arm_follows_the_servo_model_through_strokes() {
     // No fault: the follow check never fires, and its largest error is
     // small against its tolerance (15 mm).
     let mut p = Pair::new(session(), controller(), Faults::default(), 11, T0);
-    strikes(&mut p, 5000, 2);
+    p.run_strikes(2, 5000);
     assert_eq!(p.session.stats().arm_stops, 0);
     let e = p.session.follow_monitor().max_error_m * 1e3;
     assert!(e < 3.0, "largest error {e:.2} mm");

@@ -15,7 +15,6 @@
 
 use topspin_core::calib::Calibration;
 use topspin_core::motion::MotionLimits;
-use topspin_core::plan::StrikePlan;
 use topspin_core::rsi::session::{Correction, RsiSession, SessionConfig, SessionEvent};
 use topspin_core::time::{Duration, Instant};
 use topspin_sim::mock_krc::controller::ControllerConfig;
@@ -76,7 +75,7 @@ fn ten_thousand_cycles_of_strikes() {
     let lim = MotionLimits::from_robot(&cal.robot);
     let mut p = pair(4, 4, Faults::default(), 100);
     let n = 10_000u64;
-    let finals = strikes(&mut p, n);
+    let finals = p.run_strikes(4, n);
     let r = p.result();
     let st = *p.session.stats();
 
@@ -228,35 +227,15 @@ fn axis_pair(session_correction: Correction) -> Pair {
     Pair::new(RsiSession::new(cfg).unwrap(), c, Faults::default(), 11, T0)
 }
 
-/// Runs the strike stream (`topspin_sim::strikes`), published on the
-/// virtual clock, for `n` cycles; the committed plans.
-fn strikes(p: &mut Pair, n: u64) -> Vec<StrikePlan> {
-    let end = T0 + Duration::from_millis(n * 4);
-    let mut finals = Vec::new();
-    for r in strike_stream(4, T0, end) {
-        while p.now() < r.plan.made_at {
-            p.step().expect("RSI running");
-        }
-        p.publish(r.plan);
-        if r.committed {
-            finals.push(r.plan);
-        }
-    }
-    while p.now() < end {
-        p.step().expect("RSI running");
-    }
-    finals
-}
-
 #[test]
 fn axis_correction_lands_the_strokes_as_the_cartesian_one() {
     let cal = Calibration::default_cell();
     let lim = MotionLimits::from_robot(&cal.robot);
     let n = 5_000u64;
     let mut cart = pair(4, 4, Faults::default(), 100);
-    let cart_finals = strikes(&mut cart, n);
+    let cart_finals = cart.run_strikes(4, n);
     let mut axis = axis_pair(Correction::Axis);
-    let finals = strikes(&mut axis, n);
+    let finals = axis.run_strikes(4, n);
     assert_eq!(finals, cart_finals);
     assert_eq!(finals.len(), 19, "strikes");
     let (rc, r) = (cart.result(), axis.result());

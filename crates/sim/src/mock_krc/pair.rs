@@ -193,6 +193,27 @@ impl Pair {
         (0..n).take_while(|_| self.step().is_some()).count() as u64
     }
 
+    /// Publishes the strike stream (`crate::strikes`, seeded with `seed`)
+    /// on the virtual clock from now for `n` cycles, each plan at its
+    /// `made_at`; the plans committed.
+    pub fn run_strikes(&mut self, seed: u64, n: u64) -> Vec<StrikePlan> {
+        let end = self.now + Duration::from_millis(n * self.controller.config().cycle_ms as u64);
+        let mut finals = Vec::new();
+        for r in crate::strikes::strike_stream(seed, self.now, end) {
+            while self.now < r.plan.made_at {
+                self.step().expect("RSI running");
+            }
+            self.publish(r.plan);
+            if r.committed {
+                finals.push(r.plan);
+            }
+        }
+        while self.now < end {
+            self.step().expect("RSI running");
+        }
+        finals
+    }
+
     /// RSI is off for `gap` (no requests; the session sees silence), then
     /// the controller starts a fresh RSI run with `controller`: its IPOC,
     /// cycle and start pose. Answers still in flight are lost with the old
