@@ -653,7 +653,7 @@ impl RsiSession {
                 self.take_plan();
                 match self.mode {
                     ArmMode::Playing => self.step(t, rob.ipoc),
-                    ArmMode::Homing => self.step_homing(t, rob.ipoc),
+                    ArmMode::Homing => self.step_homing(t),
                     ArmMode::Stopped => self.step_stopped(t, &rob),
                     ArmMode::Held => {}
                 }
@@ -802,7 +802,7 @@ impl RsiSession {
 
     /// One cycle of the way home: the path's joints (their pose, with the
     /// start's offset blended out) become the correction.
-    fn step_homing(&mut self, t: Instant, ipoc: u64) {
+    fn step_homing(&mut self, t: Instant) {
         let Some(path) = self.homing else {
             self.mode = ArmMode::Held;
             return;
@@ -841,7 +841,6 @@ impl RsiSession {
             self.mode = ArmMode::Playing;
             self.push(SessionEvent::Home);
         }
-        let _ = ipoc;
     }
 
     /// Stopped: the command goes onto where the arm stands (at the
