@@ -129,7 +129,7 @@ fn every_arm_mode_does_not_allocate() {
         }
         .emit(&[RobElement::RIst, RobElement::AIPos], 4, &mut req)
         .unwrap();
-        if k % 3 == 0 {
+        if k.is_multiple_of(3) {
             let hit = Instant(1_000_000_000 + ((k / 150) * 150 + 140) * 4_000_000);
             s.set_plan(StrikePlan {
                 seq: k as u32,

@@ -60,7 +60,9 @@ pub struct FramesMismatch {
 impl core::fmt::Display for FramesMismatch {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         let six = |v: &[f64; 6]| {
-            format!("{{X {:.1}, Y {:.1}, Z {:.1}, A {:.1}, B {:.1}, C {:.1}}}", v[0], v[1], v[2], v[3], v[4], v[5])
+            // (+ 0.0: no "-0.0" for a value that rounds to zero)
+            let r = v.map(|x| (x * 10.0).round() / 10.0 + 0.0);
+            format!("{{X {:.1}, Y {:.1}, Z {:.1}, A {:.1}, B {:.1}, C {:.1}}}", r[0], r[1], r[2], r[3], r[4], r[5])
         };
         write!(
             f,
