@@ -34,6 +34,7 @@ const LATENCY_HELP: &str = "\
 Examples:
   topspin bench latency --duration 600 --load 1            # the shared layout: any core, normal scheduling
   topspin bench latency --duration 30 --floor             # and the floor for 30 s: each RSI figure over it
+  topspin bench latency --duration 30 --idle --floor      # the same with the arm idle at home (no balls)
   sudo topspin bench latency --layout dedicated --duration 600 --json
                                                            # a core and SCHED_FIFO each for RSI, estimator,
                                                            # ingest, mock KR C4 and tracker (6 physical cores)
@@ -74,6 +75,10 @@ pub struct LatencyArgs {
     /// With --live: no built-in client (the server idles unless Foxglove connects).
     #[arg(long)]
     pub no_live_client: bool,
+    /// No balls: the arm idles at home for the whole --duration (the RSI
+    /// loop's floor case).
+    #[arg(long)]
+    pub idle: bool,
     /// Then, for as long, the floor against the same mock: a server that
     /// only copies the IPOC into a constant answer, on the RSI thread's
     /// core, priority and wait; the RSI answer figures as ratios over it.
@@ -196,6 +201,9 @@ fn latency(a: LatencyArgs) -> anyhow::Result<()> {
     };
     let gap = 1.2;
     let mut cfg = DemoConfig { balls: (a.duration / gap).ceil() as usize, gap, ..DemoConfig::default() };
+    if a.idle {
+        (cfg.balls, cfg.tail_s) = (0, a.duration);
+    }
     cfg.runtime.rsi_wait = a.rsi_wait.unwrap_or(match a.layout {
         Layout::Shared => WaitStrategy::Blocking,
         Layout::Dedicated => WaitStrategy::BusyPoll,
@@ -241,8 +249,9 @@ fn latency(a: LatencyArgs) -> anyhow::Result<()> {
         .collect();
     if !a.json {
         eprintln!(
-            "topspin bench latency: {} s of balls every {gap} s at 150 Hz, RSI 4 ms, {} CPU hog thread(s), RSI wait {:?}, estimator busy-poll {}, live view {}",
+            "topspin bench latency: {} s {}, RSI 4 ms, {} CPU hog thread(s), RSI wait {:?}, estimator busy-poll {}, live view {}",
             a.duration,
+            if a.idle { "idle at home".to_owned() } else { format!("of balls every {gap} s at 150 Hz") },
             a.load,
             rsi_wait,
             cfg.runtime.estimator_busy_poll,
@@ -310,6 +319,7 @@ fn latency(a: LatencyArgs) -> anyhow::Result<()> {
             "{}",
             json!({
                 "duration_s": a.duration,
+                "idle": a.idle,
                 "layout": a.layout,
                 "cpus_allowed": rt::allowed_cpus(),
                 "cores": placement,

@@ -88,6 +88,10 @@ pub struct DemoConfig {
     /// (`None`: home); the daemon takes it home at the commissioning speed
     /// first, or holds where that way is unsafe.
     pub start_joints: Option<[f64; 6]>,
+    /// How long the loop runs on after the last ball's flight before the
+    /// bat is brought home and the run ends, s (with no balls: the whole
+    /// run, the arm idle at home).
+    pub tail_s: f64,
 }
 
 /// After a live client connects, time given it to subscribe.
@@ -110,6 +114,7 @@ impl Default for DemoConfig {
             mock_thread: ThreadSpec::default(),
             tracker_thread: ThreadSpec::default(),
             start_joints: None,
+            tail_s: 0.6,
         }
     }
 }
@@ -354,7 +359,7 @@ pub fn run_loopback(cfg: &DemoConfig, cal: &Calibration) -> std::io::Result<Loop
     }
     // Let the last stroke finish and the bat come home.
     let last_end = starts.last().copied().unwrap_or(0.0) + ends.last().copied().unwrap_or(0.0);
-    let until = capture_time(t0, last_end, 0.6);
+    let until = capture_time(t0, last_end, cfg.tail_s);
     clock::sleep_until(until, Duration::from_micros(0));
     daemon.request_stop();
     let drain_start = clock::now();

@@ -105,7 +105,7 @@ pub fn run_virtual(cfg: &DemoConfig, cal: &Calibration) -> VirtualRun {
     }
 
     let last_end = starts.last().copied().unwrap_or(0.0) + ends.last().copied().unwrap_or(0.0);
-    let end = t0 + Duration::from_nanos(((last_end + 0.6).max(0.0) * 1e9) as u64);
+    let end = t0 + Duration::from_nanos(((last_end + cfg.tail_s).max(0.0) * 1e9) as u64);
     let mut last_plans: Vec<StrikePlan> = Vec::new();
     let mut next = 0;
     while pair.now() < end {
