@@ -261,8 +261,11 @@ pub struct StrokeGenerator {
     qd: [f64; AXES],
     qdd: [f64; AXES],
     t_last: f64,
-    /// The TCP pose of `q` (angles unwrapped near the last).
+    /// The TCP pose of `q` (angles unwrapped near the last) …
     p: Pose6,
+    /// … computed at these joints (NaN: not the kinematics of any; an
+    /// arm at rest keeps its pose without a forward kinematics a cycle).
+    p_of: [f64; AXES],
     late_by: f64,
     /// Ruckig calculations done.
     pub calculations: u64,
@@ -297,6 +300,7 @@ impl StrokeGenerator {
             qdd: [0.0; AXES],
             t_last: 0.0,
             p: start,
+            p_of: [f64::NAN; AXES],
             late_by: 0.0,
             calculations: 0,
             failures: 0,
@@ -316,6 +320,7 @@ impl StrokeGenerator {
         self.qd = [0.0; AXES];
         self.qdd = [0.0; AXES];
         self.p = start;
+        self.p_of = [f64::NAN; AXES];
         self.t_last = secs(now);
         self.target = None;
         self.late_by = 0.0;
@@ -354,6 +359,11 @@ impl StrokeGenerator {
     /// The limits in use.
     pub fn limits(&self) -> &MotionLimits {
         &self.lim
+    }
+
+    /// The last setpoint: the TCP pose of [`Self::joints`] (B, m and rad).
+    pub fn pose(&self) -> Pose6 {
+        self.p
     }
 
     /// The joints of the last setpoint, rad.
@@ -668,6 +678,7 @@ impl StrokeGenerator {
             self.qd = qd;
             self.qdd = [0.0; AXES];
             self.p = p;
+            self.p_of = [f64::NAN; AXES];
         }
         match (self.phase, self.target) {
             (Phase::Approach, Some(t)) if t.hit_time > self.t_last => {
@@ -725,6 +736,10 @@ impl StrokeGenerator {
 
     /// `p` from `q` (forward kinematics; angles unwrapped near the last).
     fn update_pose(&mut self) {
+        if self.p_of == self.q {
+            return; // at rest: the same joints, the same pose
+        }
+        self.p_of = self.q;
         let tcp = self.lim.arm.tcp(&Joints(self.q)).to_pose6();
         self.p[..3].copy_from_slice(&tcp[..3]);
         for i in 3..6 {

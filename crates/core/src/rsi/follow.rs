@@ -28,6 +28,8 @@ pub struct FollowMonitor {
     /// Joints sent, oldest first: `dead + 1` of them once primed.
     line: Deque<Joints, { MAX_DEAD_CYCLES + 1 }>,
     predicted: Joints,
+    /// The TCP of `predicted` (an arm at rest: no kinematics a cycle).
+    tcp: Option<(Joints, Pose)>,
     over: u32,
     /// The last error seen: position (m) and turn (rad).
     pub error: (f64, f64),
@@ -48,6 +50,7 @@ impl FollowMonitor {
             cycles: cycles.max(1),
             line: Deque::new(),
             predicted: Joints([0.0; AXES]),
+            tcp: None,
             over: 0,
             error: (0.0, 0.0),
             max_error_m: 0.0,
@@ -100,7 +103,15 @@ impl FollowMonitor {
                 self.predicted.0[i] += self.alpha * (cmd.0[i] - self.predicted.0[i]);
             }
         }
-        let (dp, da) = rist.distance(&arm.tcp(&self.predicted));
+        let tcp = match self.tcp {
+            Some((q, p)) if q == self.predicted => p,
+            _ => {
+                let p = arm.tcp(&self.predicted);
+                self.tcp = Some((self.predicted, p));
+                p
+            }
+        };
+        let (dp, da) = rist.distance(&tcp);
         self.error = (dp, da);
         if dp > self.tol_m * scale || da > self.tol_rad * scale {
             self.over += 1;

@@ -1056,7 +1056,8 @@ impl RsiSession {
         };
         let (sent, sent_joints): (Pose6, Option<Joints>) = if gain > 0.0 && consistent && self.last_joints_valid {
             let lead = Joints(core::array::from_fn(|i| q.0[i] + gain * (q.0[i] - self.last_joints.0[i])));
-            let p = self.cfg.limits.arm.tcp(&lead).to_pose6();
+            // At rest the lead is the setpoint itself: its pose is known.
+            let p = if lead == q { self.generator.pose() } else { self.cfg.limits.arm.tcp(&lead).to_pose6() };
             (core::array::from_fn(|i| if i < 3 { p[i] } else { unwrap_near(p[i], cmd[i]) }), Some(lead))
         } else {
             let sent = core::array::from_fn(|i| cmd[i] + gain * (cmd[i] - self.last_command[i]));
