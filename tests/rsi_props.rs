@@ -84,15 +84,24 @@ proptest! {
 fn session_with_robot() -> (RsiSession, MotionLimits, Vec<u8>) {
     let cal = Calibration::default_cell();
     let lim = MotionLimits::from_robot(&cal.robot);
-    let s = RsiSession::new(SessionConfig::from_calibration(&cal, "ImFree")).unwrap();
+    let mut cfg = SessionConfig::from_calibration(&cal, "ImFree");
+    // The controller's arm stands at home whatever is planned: the follow
+    // check runs but does not stop the strokes under test.
+    (cfg.start.follow_tolerance_mm, cfg.start.follow_tolerance_deg) = (1e9, 1e9);
+    let s = RsiSession::new(cfg).unwrap();
     (s, lim, Vec::new())
 }
 
 fn rob(ipoc: u64) -> Vec<u8> {
     let mut buf = [0u8; 1024];
-    let f =
-        RobFrame { ipoc, rist: Some(KukaPose::from_array([350.0, 0.0, 450.0, 180.0, 0.0, 0.0])), ..Default::default() };
-    let n = f.emit(&[RobElement::RIst], 4, &mut buf).unwrap();
+    let home = MotionLimits::from_robot(&Calibration::default_cell().robot).home_joints.degrees();
+    let f = RobFrame {
+        ipoc,
+        rist: Some(KukaPose::from_array([350.0, 0.0, 450.0, 180.0, 0.0, 0.0])),
+        aipos: Some(home),
+        ..Default::default()
+    };
+    let n = f.emit(&[RobElement::RIst, RobElement::AIPos], 4, &mut buf).unwrap();
     buf[..n].to_vec()
 }
 

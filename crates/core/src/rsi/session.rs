@@ -1224,7 +1224,9 @@ mod tests {
         let a = a.unwrap();
         let expect = [-0.25, 0.0, 0.0, 0.0, 0.0, 0.5];
         assert!(a.iter().zip(expect).all(|(x, e)| (x - e).abs() <= 1e-4 + 1e-12), "{a:?}");
-        // Without AIPos in the SEND list: the solution for RIst nearest home.
+        // Without AIPos in the SEND list: held (the tool and base cannot be
+        // checked), zero corrections, the start joints the solution for
+        // RIst nearest home.
         let mut s = session(Correction::Axis);
         let (_, a) = cycle(&mut s, 0, rist, None);
         assert_eq!(a, Some([0.0; 6]));
@@ -1362,7 +1364,7 @@ mod tests {
             (Some(nan), Some(aipos), "unreadable"),
             (Some(r), Some(inf), "unreadable"),
             (Some(r), Some(past), "joint_limit"),
-            (None, Some(aipos), "no_pose"),
+            (None, Some(aipos), "missing"),
         ] {
             let (mut s, ev, rkorr) = start_with(rist, aipos);
             assert_eq!(rkorr, Some(KukaPose::default()), "answered with zero corrections");
@@ -1397,11 +1399,9 @@ mod tests {
         let Some(StartRefused::Frames(m)) = refusal(&ev) else { panic!("{ev:?}") };
         assert!(m.mm > 200.0, "{m:?}");
         assert_eq!(m.likely, crate::rsi::start::LikelyFrame::Tool);
-        // Without AIPos the pose is taken as it is: 180° of turn from home
-        // is past POSCORR's 90° (and POSCORRMON's 100°): held, with the fix.
+        // Without AIPos nothing can be checked: held, naming what is missing.
         let (_, ev, rkorr) = start_with(Some(rist), None);
         assert_eq!(rkorr, Some(KukaPose::default()));
-        let Some(r @ StartRefused::WayHome(_)) = refusal(&ev) else { panic!("{ev:?}") };
-        assert!(r.fix().contains("PTP to home in topspin_rsi.src"));
+        assert_eq!(refusal(&ev), Some(StartRefused::Missing("AIPos")), "{ev:?}");
     }
 }

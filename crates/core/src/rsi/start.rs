@@ -81,9 +81,10 @@ impl core::fmt::Display for FramesMismatch {
 /// Why a start cannot be used as it is.
 #[derive(Copy, Clone, Debug, PartialEq, thiserror::Error)]
 pub enum StartRefused {
-    /// No `RIst` in the request (the SEND list must carry it).
-    #[error("the first request has no RIst (add DEF_RIst to the SEND list)")]
-    NoPose,
+    /// No `RIst` or no `AIPos` in the request (the SEND list must carry
+    /// both: without the joints the tool and base cannot be checked).
+    #[error("the first request has no {0} (add DEF_{0} to the SEND list of the Ethernet configuration)")]
+    Missing(&'static str),
     /// `RIst` or `AIPos` has a non-finite or missing value.
     #[error("the first request's {0} has a value that is missing or not finite")]
     Unreadable(&'static str),
@@ -102,7 +103,7 @@ impl StartRefused {
     /// A short key for counting refusals.
     pub fn key(&self) -> &'static str {
         match self {
-            StartRefused::NoPose => "no_pose",
+            StartRefused::Missing(_) => "missing",
             StartRefused::Unreadable(_) => "unreadable",
             StartRefused::JointLimit(_) => "joint_limit",
             StartRefused::Frames(_) => "tool_or_base",
@@ -127,7 +128,7 @@ pub fn read_start(
     rist: Option<KukaPose>,
     aipos: Option<Axes>,
     bad: Option<CodecError>,
-) -> Result<(Pose, Option<Joints>), StartRefused> {
+) -> Result<(Pose, Joints), StartRefused> {
     let unreadable = |name: &'static str| matches!(bad, Some(CodecError::BadNumber { element } | CodecError::MissingAttribute { element, .. }) if element == name);
     if unreadable("RIst") {
         return Err(StartRefused::Unreadable("RIst"));
@@ -135,13 +136,13 @@ pub fn read_start(
     if unreadable("AIPos") {
         return Err(StartRefused::Unreadable("AIPos"));
     }
-    let p = rist.ok_or(StartRefused::NoPose)?.to_array();
+    let p = rist.ok_or(StartRefused::Missing("RIst"))?.to_array();
     if !p.iter().all(|x| x.is_finite()) {
         return Err(StartRefused::Unreadable("RIst"));
     }
     let pose = Pose::from_xyz_abc([p[0], p[1], p[2]].map(|x| x * 1e-3), [p[3], p[4], p[5]].map(f64::to_radians));
-    let joints = match aipos {
-        None => None,
+    let q = match aipos {
+        None => return Err(StartRefused::Missing("AIPos")),
         Some(a) if !a.iter().all(|x| x.is_finite()) => return Err(StartRefused::Unreadable("AIPos")),
         Some(a) => {
             let q = Joints::from_degrees(a);
@@ -156,10 +157,10 @@ pub fn read_start(
                     limit,
                 }));
             }
-            Some(q)
+            q
         }
     };
-    Ok((pose, joints))
+    Ok((pose, q))
 }
 
 /// KUKA's X, Y, Z (mm), A, B, C (degrees) of a frame.
@@ -248,14 +249,14 @@ pub fn assess(
         Err(_) => home,
     };
     let joints = match &read {
-        Ok((_, Some(q))) => *q,
-        _ => lim.arm.inverse_near(&Pose::from_pose6(&pose), &lim.home_joints).unwrap_or(lim.home_joints),
+        Ok((_, q)) => *q,
+        Err(_) => lim.arm.inverse_near(&Pose::from_pose6(&pose), &lim.home_joints).unwrap_or(lim.home_joints),
     };
     let (d, a) = Pose::from_pose6(&pose).distance(&Pose::from_pose6(&home));
     let (from_mm, from_deg) = (d * 1e3, a.to_degrees());
     let verdict = match read {
         Err(r) => Verdict::Refused(r),
-        Ok((p, Some(q)))
+        Ok((p, q))
             if let Some(m) =
                 check_frames(&lim.arm, &p, &q, policy.frames_tolerance_mm, policy.frames_tolerance_deg) =>
         {
@@ -333,7 +334,8 @@ mod tests {
     fn unusable_start_poses_are_named() {
         let (arm, q) = arm();
         let rist = Some(KukaPose::from_array([350.0, 0.0, 450.0, 180.0, 0.0, 0.0]));
-        assert_eq!(read_start(&arm, None, None, None), Err(StartRefused::NoPose));
+        assert_eq!(read_start(&arm, None, None, None), Err(StartRefused::Missing("RIst")));
+        assert_eq!(read_start(&arm, rist, None, None), Err(StartRefused::Missing("AIPos")));
         let nan = Some(KukaPose::from_array([f64::NAN, 0.0, 450.0, 180.0, 0.0, 0.0]));
         assert_eq!(read_start(&arm, nan, None, None), Err(StartRefused::Unreadable("RIst")));
         let bad = Some(CodecError::BadNumber { element: "RIst" });
@@ -346,6 +348,6 @@ mod tests {
         let Err(StartRefused::JointLimit(v)) = read_start(&arm, rist, Some(a), None) else { panic!("A1 at 171°") };
         assert_eq!(v.axis, crate::kinematics::Axis::A1);
         let (p, j) = read_start(&arm, rist, Some(q.degrees()), None).unwrap();
-        assert!((p.position.x - 0.35).abs() < 1e-12 && j.unwrap().max_abs_diff(&q) < 1e-12);
+        assert!((p.position.x - 0.35).abs() < 1e-12 && j.max_abs_diff(&q) < 1e-12);
     }
 }

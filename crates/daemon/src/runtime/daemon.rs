@@ -673,7 +673,7 @@ mod tests {
         assert_eq!(next_link(LinkState::Home, &going), Some(LinkState::Moving));
         assert_eq!(next_link(LinkState::Moving, &SessionEvent::Home), Some(LinkState::Home));
         let refused = SessionEvent::StartRefused {
-            reason: topspin_core::rsi::start::StartRefused::NoPose,
+            reason: topspin_core::rsi::start::StartRefused::Missing("RIst"),
             from_mm: 0.0,
             from_deg: 0.0,
         };

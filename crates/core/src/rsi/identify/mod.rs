@@ -434,7 +434,7 @@ impl Identifier {
                 self.start = p;
                 self.state = IdentifierState::Exciting;
                 // Another TOOL or BASE than the calibration: do not move.
-                if let (Ok((pose, Some(q))), (mm, deg)) =
+                if let (Ok((pose, q)), (mm, deg)) =
                     (crate::rsi::start::read_start(&self.cfg.arm, Some(p), rob.aipos, None), self.cfg.frames_tolerance)
                     && let Some(m) = crate::rsi::start::check_frames(&self.cfg.arm, &pose, &q, mm, deg)
                 {
