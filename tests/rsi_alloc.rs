@@ -101,17 +101,7 @@ fn every_arm_mode_does_not_allocate() {
     q.0[4] -= 0.2;
     let mut req = [0u8; 1024];
     let mut out = [0u8; MAX_ANSWER_LEN];
-    let kuka = |q: &topspin_core::kinematics::Joints| {
-        let p = arm.tcp(q).to_pose6();
-        KukaPose::from_array([
-            p[0] * 1e3,
-            p[1] * 1e3,
-            p[2] * 1e3,
-            p[3].to_degrees(),
-            p[4].to_degrees(),
-            p[5].to_degrees(),
-        ])
-    };
+    let kuka = |q: &topspin_core::kinematics::Joints| KukaPose::from_pose(&arm.tcp(q));
     let mut braked = None;
     let mut cycle = |k: u64, s: &mut RsiSession| {
         let now = Instant(1_000_000_000 + k * 4_000_000);

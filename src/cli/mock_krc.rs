@@ -115,10 +115,7 @@ fn parse_brakes(s: &str) -> Result<topspin_sim::mock_krc::Brakes, String> {
 
 /// A KUKA frame (mm, degrees) as a pose.
 fn frame(v: [f64; 6]) -> topspin_core::kinematics::Pose {
-    topspin_core::kinematics::Pose::from_xyz_abc(
-        [v[0], v[1], v[2]].map(|x| x * 1e-3),
-        [v[3], v[4], v[5]].map(f64::to_radians),
-    )
+    topspin_core::rsi::codec::KukaPose::from_array(v).to_pose()
 }
 
 pub(crate) fn parse_correction(s: &str) -> Result<Correction, String> {

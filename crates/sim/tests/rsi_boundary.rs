@@ -9,6 +9,7 @@
 use topspin_core::calib::Calibration;
 use topspin_core::kinematics::{Joints, Pose};
 use topspin_core::motion::{MotionLimits, PlanRejected};
+use topspin_core::rsi::codec::KukaPose;
 use topspin_core::rsi::session::{ArmMode, RsiSession, SessionConfig, SessionEvent};
 use topspin_core::rsi::start::{LikelyFrame, StartRefused};
 use topspin_core::time::{Duration, Instant};
@@ -40,7 +41,7 @@ fn standing_off_home(deg: [f64; 6]) -> ControllerConfig {
 }
 
 fn pose(s: &[f64; 6]) -> Pose {
-    Pose::from_xyz_abc([s[0], s[1], s[2]].map(|x| x * 1e-3), [s[3], s[4], s[5]].map(f64::to_radians))
+    KukaPose::from_array(*s).to_pose()
 }
 
 /// The largest step of the commanded TCP (mm) and turn (degrees) per cycle.

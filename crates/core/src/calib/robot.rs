@@ -86,6 +86,11 @@ pub struct StartPolicy {
 }
 
 impl StartPolicy {
+    /// An arm this far from home (mm, degrees) counts as home.
+    pub fn is_home(&self, mm: f64, deg: f64) -> bool {
+        mm <= self.home_tolerance_mm && deg <= self.home_tolerance_deg
+    }
+
     /// The `[start]` of the compiled-in `calib/robot.toml`.
     pub fn compiled_in() -> Self {
         let file: RobotFile = toml::from_str(super::DEFAULT_ROBOT).expect("compiled-in calibration is valid (tested)");

@@ -68,7 +68,7 @@ pub enum WayHomeBlocked {
     /// The way passes (or starts at) the singular wrist.
     #[error("the way home passes the singular wrist (A5 {a5_deg:.1}°)")]
     SingularWrist {
-        /// A5 at the worst sample, degrees.
+        /// A5 where the way is singular, degrees (0 where it passes through).
         a5_deg: f64,
     },
     /// An axis outside its software limits on the way.
@@ -119,9 +119,9 @@ pub struct HomingPath {
 }
 
 impl HomingPath {
-    /// The way from joints `from` (pose `start`, the RSI start pose the
-    /// controller's corrections are relative to) to joints `to`, starting
-    /// at `t0` s; refused where it is unsafe (module doc).
+    /// The way from joints `from` to joints `to`, starting at `t0` s, with
+    /// the controller's corrections relative to `correction_start` (the RSI
+    /// start pose); refused where it is unsafe (module doc).
     pub fn plan(
         arm: &Arm,
         lim: &HomingLimits,
@@ -131,10 +131,9 @@ impl HomingPath {
         t0: f64,
     ) -> Result<Self, WayHomeBlocked> {
         let at = |s: f64| Joints(core::array::from_fn(|i| from.0[i] + s * (to.0[i] - from.0[i])));
-        let p_from = arm.tcp(from).to_pose6();
-        let excess = |p: &Pose6, i: usize| (lim.box_lo[i] - p[i]).max(p[i] - lim.box_hi[i]).max(0.0);
-        let mut worst_a5 = f64::INFINITY;
         let mut last = arm.tcp(from);
+        let p_from = last.to_pose6();
+        let excess = |p: &Pose6, i: usize| (lim.box_lo[i] - p[i]).max(p[i] - lim.box_hi[i]).max(0.0);
         let mut last6 = p_from;
         // The path's fastest stretch: metres and radians per unit of s.
         let (mut dp_ds, mut dth_ds) = (0.0f64, 0.0f64);
@@ -148,9 +147,6 @@ impl HomingPath {
                 }
                 _ => WayHomeBlocked::Limit(v),
             })?;
-            if q.0[4].abs() < worst_a5.abs() {
-                worst_a5 = q.0[4];
-            }
             let pose = arm.tcp(&q);
             let mut p6 = pose.to_pose6();
             for i in 3..6 {
@@ -171,9 +167,10 @@ impl HomingPath {
             last = pose;
             last6 = p6;
         }
-        let singular = arm.limits.singular_a5;
-        if (from.0[4] < 0.0) != (to.0[4] < 0.0) || worst_a5.abs() < singular {
-            return Err(WayHomeBlocked::SingularWrist { a5_deg: worst_a5.to_degrees() });
+        // Every sample is off the singular wrist (checked above); between
+        // two, A5 (a straight line) passes it only where it changes sign.
+        if (from.0[4] < 0.0) != (to.0[4] < 0.0) {
+            return Err(WayHomeBlocked::SingularWrist { a5_deg: 0.0 });
         }
         // The cruise rate: the fastest stretch at the speed, the turn at the
         // rate, and no axis over a tenth of its own speed.
@@ -236,11 +233,6 @@ impl HomingPath {
     /// How long the way takes, s.
     pub fn duration(&self) -> f64 {
         self.duration
-    }
-
-    /// Where it ends.
-    pub fn to(&self) -> Joints {
-        self.to
     }
 }
 

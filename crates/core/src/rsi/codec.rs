@@ -50,6 +50,20 @@ impl KukaPose {
     pub fn from_array(v: [f64; 6]) -> Self {
         KukaPose { x: v[0], y: v[1], z: v[2], a: v[3], b: v[4], c: v[5] }
     }
+
+    /// As a frame (m, rad; R = Rz(A)·Ry(B)·Rx(C)).
+    pub fn to_pose(self) -> crate::kinematics::Pose {
+        crate::kinematics::Pose::from_xyz_abc(
+            [self.x, self.y, self.z].map(|v| v * 1e-3),
+            [self.a, self.b, self.c].map(f64::to_radians),
+        )
+    }
+
+    /// A frame in KUKA's units (mm, degrees; angles as [`Pose::abc`](crate::kinematics::Pose::abc)).
+    pub fn from_pose(p: &crate::kinematics::Pose) -> Self {
+        let [a, b, c] = p.abc().map(f64::to_degrees);
+        KukaPose { x: p.position.x * 1e3, y: p.position.y * 1e3, z: p.position.z * 1e3, a, b, c }
+    }
 }
 
 /// Axis angles A1..A6 in degrees.

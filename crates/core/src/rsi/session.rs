@@ -56,12 +56,12 @@ use heapless::Deque;
 
 use super::codec::{Axes, CodecError, KukaPose, RobFrame, SenFrame, check_text};
 use super::follow::FollowMonitor;
-use super::start::{StartRefused, Verdict, assess};
+use super::start::{StartRefused, Verdict, assess, from_home};
 use crate::calib::Calibration;
 use crate::calib::robot::StartPolicy;
 use crate::kinematics::{Joints, Pose, Unreachable};
 use crate::motion::generator::Phase;
-use crate::motion::homing::{HomingLimits, HomingPath, WayHomeBlocked};
+use crate::motion::homing::{HomingLimits, HomingPath, WayHomeBlocked, correction};
 use crate::motion::limits::unwrap_near;
 use crate::motion::{MotionLimits, PlanRejected, Pose6, SafetyFilter, StrokeGenerator};
 use crate::plan::StrikePlan;
@@ -571,11 +571,6 @@ impl RsiSession {
         self.mode
     }
 
-    /// The way home under way (or the last one).
-    pub fn homing_path(&self) -> Option<&HomingPath> {
-        self.homing.as_ref()
-    }
-
     /// The follow check (its last and largest errors).
     pub fn follow_monitor(&self) -> &FollowMonitor {
         &self.follow
@@ -722,8 +717,7 @@ impl RsiSession {
         self.fit_box();
         self.state = SessionState::Running;
         self.mode = ArmMode::Playing;
-        let st = &self.cfg.start;
-        let off_home = start.from_mm > st.home_tolerance_mm || start.from_deg > st.home_tolerance_deg;
+        let off_home = !self.cfg.start.is_home(start.from_mm, start.from_deg);
         self.push(SessionEvent::Started { ipoc: rob.ipoc, off_home });
         match start.verdict {
             Verdict::Refused(r) => self.refuse(r),
@@ -769,8 +763,8 @@ impl RsiSession {
         self.mode = ArmMode::Held;
         self.homing = None;
         self.stats.starts_refused += 1;
-        let (d, a) = Pose::from_pose6(&self.last_command).distance(&Pose::from_pose6(&self.cfg.limits.home));
-        self.push(SessionEvent::StartRefused { reason, from_mm: d * 1e3, from_deg: a.to_degrees() });
+        let (from_mm, from_deg) = from_home(&self.cfg.limits, &self.last_command);
+        self.push(SessionEvent::StartRefused { reason, from_mm, from_deg });
     }
 
     /// The way home from joints `q` (commanded pose `p`), starting at `t`;
@@ -788,13 +782,9 @@ impl RsiSession {
         let fk = self.cfg.limits.arm.tcp(&q).to_pose6();
         self.homing_offset =
             core::array::from_fn(|i| if i < 3 { p[i] - fk[i] } else { unwrap_near(p[i], fk[i]) - fk[i] });
-        let (d, a) = Pose::from_pose6(&p).distance(&Pose::from_pose6(&self.cfg.limits.home));
+        let (from_mm, from_deg) = from_home(&self.cfg.limits, &p);
         self.stats.ways_home += 1;
-        self.push(SessionEvent::GoingHome {
-            from_mm: d * 1e3,
-            from_deg: a.to_degrees(),
-            duration: Duration((path.duration() * 1e9) as u64),
-        });
+        self.push(SessionEvent::GoingHome { from_mm, from_deg, duration: Duration((path.duration() * 1e9) as u64) });
         self.homing = Some(path);
         self.mode = ArmMode::Homing;
         self.last_joints_valid = false;
@@ -811,7 +801,7 @@ impl RsiSession {
         let q = path.joints_at(ts);
         let arm = &self.cfg.limits.arm;
         let fk = arm.tcp(&q).to_pose6();
-        let s_left = if path.duration() > 0.0 { 1.0 - path.progress(ts) } else { 0.0 };
+        let s_left = 1.0 - path.progress(ts);
         let mut p: Pose6 = core::array::from_fn(|i| fk[i] + s_left * self.homing_offset[i]);
         for i in 3..6 {
             p[i] = unwrap_near(p[i], self.last_command[i]);
@@ -831,16 +821,20 @@ impl RsiSession {
             Correction::Axis => self.send_joints(q, &p),
         }
         if path.done(ts) {
-            // Home, at rest: the generator and the filter start from here.
-            let home = self.cfg.limits.home;
-            let t_start = Instant(t.0.saturating_sub(self.cfg.cycle_ms as u64 * 1_000_000));
-            self.generator.reset(t_start, home);
-            self.safety.reset(home);
-            self.last_command = home;
-            self.last_joints_valid = false;
-            self.mode = ArmMode::Playing;
-            self.push(SessionEvent::Home);
+            self.play_from(t, self.cfg.limits.home);
         }
+    }
+
+    /// Home (or within its tolerance) at rest at `p`, at setpoint time `t`:
+    /// the generator and the filter start from there, plans are taken.
+    fn play_from(&mut self, t: Instant, p: Pose6) {
+        let t_start = Instant(t.0.saturating_sub(self.cfg.cycle_ms as u64 * 1_000_000));
+        self.generator.reset(t_start, p);
+        self.safety.reset(p);
+        self.last_command = p;
+        self.last_joints_valid = false;
+        self.mode = ArmMode::Playing;
+        self.push(SessionEvent::Home);
     }
 
     /// Stopped: the command goes onto where the arm stands (at the
@@ -885,26 +879,20 @@ impl RsiSession {
             self.still_cycles = 0;
         }
         if self.still_cycles as f64 * dt >= self.cfg.start.still_s {
-            let arm = &self.cfg.limits.arm;
-            let q = match rob.aipos.map(Joints::from_degrees) {
-                Some(q) if q.0.iter().all(|x| x.is_finite()) => q,
-                _ => {
-                    arm.inverse_near(&Pose::from_pose6(&rist), &self.last_sent_joints).unwrap_or(self.last_sent_joints)
-                }
-            };
+            let q = self.arm_joints(rob, &self.last_sent_joints).unwrap_or(self.last_sent_joints);
             self.follow.resync(q);
-            let st = &self.cfg.start;
-            let (d, a) = Pose::from_pose6(&cmd).distance(&Pose::from_pose6(&self.cfg.limits.home));
-            if d * 1e3 <= st.home_tolerance_mm && a.to_degrees() <= st.home_tolerance_deg {
-                let t_start = Instant(t.0.saturating_sub(self.cfg.cycle_ms as u64 * 1_000_000));
-                self.generator.reset(t_start, cmd);
-                self.safety.reset(cmd);
-                self.last_joints_valid = false;
-                self.mode = ArmMode::Playing;
-                self.push(SessionEvent::Home);
-            } else {
-                self.go_home_from(t, q, cmd);
-            }
+            let (mm, deg) = from_home(&self.cfg.limits, &cmd);
+            if self.cfg.start.is_home(mm, deg) { self.play_from(t, cmd) } else { self.go_home_from(t, q, cmd) }
+        }
+    }
+
+    /// The arm's joints from a request: `AIPos`, else the solution for
+    /// `RIst` nearest `near`; `None` when neither gives any.
+    fn arm_joints(&self, rob: &RobFrame, near: &Joints) -> Option<Joints> {
+        match (rob.aipos.map(Joints::from_degrees), rob.rist) {
+            (Some(q), _) if q.0.iter().all(|x| x.is_finite()) => Some(q),
+            (_, Some(k)) => self.cfg.limits.arm.inverse_near(&Pose::from_pose6(&self.pose_of(k)), near).ok(),
+            _ => None,
         }
     }
 
@@ -932,18 +920,9 @@ impl RsiSession {
 
     /// The model restarts from the arm's pose (cycles were missed).
     fn resync_follow(&mut self, rob: &RobFrame) {
-        let q = match (rob.aipos.map(Joints::from_degrees), rob.rist) {
-            (Some(q), _) if q.0.iter().all(|x| x.is_finite()) => q,
-            (_, Some(k)) => {
-                let p = Pose::from_pose6(&self.pose_of(k));
-                match self.cfg.limits.arm.inverse_near(&p, &self.follow.predicted()) {
-                    Ok(q) => q,
-                    Err(_) => return,
-                }
-            }
-            _ => return,
-        };
-        self.follow.resync(q);
+        if let Some(q) = self.arm_joints(rob, &self.follow.predicted()) {
+            self.follow.resync(q);
+        }
     }
 
     /// The arm stopped following: the stroke ends, the last command holds.
@@ -1077,14 +1056,7 @@ impl RsiSession {
 
     /// RKorr: `sent` − the start pose, mm and degrees (angles within ±180°).
     fn cartesian_correction(&mut self, sent: &Pose6, cmd: &Pose6, q: Joints) {
-        let mut k = [0.0; 6];
-        for i in 0..3 {
-            k[i] = (sent[i] - self.start[i]) * 1e3;
-        }
-        for i in 3..6 {
-            let d = (sent[i] - self.start[i]).to_degrees();
-            k[i] = d - (d / 360.0).round() * 360.0;
-        }
+        let k = correction(&self.start, sent);
         if k.iter().all(|x| x.is_finite()) {
             self.last_correction = KukaPose::from_array(k);
             self.last_command = *cmd;

@@ -136,28 +136,24 @@ pub fn read_start(
     if unreadable("AIPos") {
         return Err(StartRefused::Unreadable("AIPos"));
     }
-    let p = rist.ok_or(StartRefused::Missing("RIst"))?.to_array();
-    if !p.iter().all(|x| x.is_finite()) {
+    let rist = rist.ok_or(StartRefused::Missing("RIst"))?;
+    if !rist.to_array().iter().all(|x| x.is_finite()) {
         return Err(StartRefused::Unreadable("RIst"));
     }
-    let pose = Pose::from_xyz_abc([p[0], p[1], p[2]].map(|x| x * 1e-3), [p[3], p[4], p[5]].map(f64::to_radians));
+    let pose = rist.to_pose();
     let q = match aipos {
         None => return Err(StartRefused::Missing("AIPos")),
         Some(a) if !a.iter().all(|x| x.is_finite()) => return Err(StartRefused::Unreadable("AIPos")),
         Some(a) => {
             let q = Joints::from_degrees(a);
-            // Position limits only: the singular wrist is the way home's matter.
-            if let Some(i) = (0..6).find(|&i| !(arm.limits.min[i]..=arm.limits.max[i]).contains(&q.0[i])) {
-                let v = q.0[i];
-                let limit = if v < arm.limits.min[i] { arm.limits.min[i] } else { arm.limits.max[i] };
-                return Err(StartRefused::JointLimit(LimitViolation {
-                    axis: crate::kinematics::Axis::ALL[i],
-                    kind: crate::kinematics::LimitKind::Position,
-                    value: v,
-                    limit,
-                }));
+            // Position limits only (checked first): the singular wrist is
+            // the way home's matter.
+            match arm.limits.check_position(&q) {
+                Err(v) if v.kind != crate::kinematics::LimitKind::SingularWrist => {
+                    return Err(StartRefused::JointLimit(v));
+                }
+                _ => q,
             }
-            q
         }
     };
     Ok((pose, q))
@@ -165,8 +161,7 @@ pub fn read_start(
 
 /// KUKA's X, Y, Z (mm), A, B, C (degrees) of a frame.
 fn kuka(p: &Pose) -> [f64; 6] {
-    let [a, b, c] = p.abc();
-    [p.position.x * 1e3, p.position.y * 1e3, p.position.z * 1e3, a.to_degrees(), b.to_degrees(), c.to_degrees()]
+    KukaPose::from_pose(p).to_array()
 }
 
 /// Values a person would have typed differently: positions over half a
@@ -223,6 +218,12 @@ pub struct Start {
     pub verdict: Verdict,
 }
 
+/// How far `pose` (B, m and rad) is from the cell's home: mm and degrees.
+pub fn from_home(lim: &MotionLimits, pose: &Pose6) -> (f64, f64) {
+    let (d, a) = Pose::from_pose6(pose).distance(&Pose::from_pose6(&lim.home));
+    (d * 1e3, a.to_degrees())
+}
+
 /// The first request's `RIst`, `AIPos` (and unreadable element `bad`)
 /// against the cell: usable, the calibration's tool and base, home or the
 /// way home from there (starting at `t0` s). The RSI session's decision,
@@ -252,8 +253,7 @@ pub fn assess(
         Ok((_, q)) => *q,
         Err(_) => lim.arm.inverse_near(&Pose::from_pose6(&pose), &lim.home_joints).unwrap_or(lim.home_joints),
     };
-    let (d, a) = Pose::from_pose6(&pose).distance(&Pose::from_pose6(&home));
-    let (from_mm, from_deg) = (d * 1e3, a.to_degrees());
+    let (from_mm, from_deg) = from_home(lim, &pose);
     let verdict = match read {
         Err(r) => Verdict::Refused(r),
         Ok((p, q))
@@ -262,7 +262,7 @@ pub fn assess(
         {
             Verdict::Refused(StartRefused::Frames(m))
         }
-        Ok(_) if from_mm <= policy.home_tolerance_mm && from_deg <= policy.home_tolerance_deg => Verdict::Home,
+        Ok(_) if policy.is_home(from_mm, from_deg) => Verdict::Home,
         Ok(_) => match HomingPath::plan(&lim.arm, homing, &pose, &joints, &lim.home_joints, t0) {
             Ok(path) => Verdict::GoHome(path),
             Err(e) => Verdict::Refused(StartRefused::WayHome(e)),

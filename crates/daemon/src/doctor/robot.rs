@@ -78,17 +78,7 @@ mod tests {
         let cal = Calibration::default_cell();
         let arm = cal.robot.arm();
         let home = cal.robot.home_joints(&arm).unwrap();
-        let kuka = |q: &topspin_core::kinematics::Joints| {
-            let p = arm.tcp(q).to_pose6();
-            KukaPose::from_array([
-                p[0] * 1e3,
-                p[1] * 1e3,
-                p[2] * 1e3,
-                p[3].to_degrees(),
-                p[4].to_degrees(),
-                p[5].to_degrees(),
-            ])
-        };
+        let kuka = |q: &topspin_core::kinematics::Joints| KukaPose::from_pose(&arm.tcp(q));
         assert_eq!(judge(&cal, Some(kuka(&home)), Some(home.degrees())).status, Status::Pass);
         let mut q = home;
         q.0[0] += 0.3;

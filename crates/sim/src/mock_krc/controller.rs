@@ -56,11 +56,6 @@ use topspin_core::time::Instant;
 /// The longest dead time the mock models, cycles.
 pub const MAX_DEAD_TIME_CYCLES: usize = 32;
 
-/// A pose in KUKA's units (mm, degrees A/B/C) as a kinematics pose (m, rad).
-fn kuka_pose(p: &[f64; 6]) -> Pose {
-    Pose::from_xyz_abc([p[0], p[1], p[2]].map(|x| x * 1e-3), [p[3], p[4], p[5]].map(f64::to_radians))
-}
-
 /// Brakes applied at a cycle for a number of cycles.
 #[derive(Copy, Clone, Debug, PartialEq, Eq)]
 pub struct Brakes {
@@ -205,8 +200,7 @@ impl ControllerConfig {
     /// The arm standing at joints `q` (rad) at RSI start: `start` is their
     /// TCP in `base`.
     pub fn stand_at(&mut self, q: Joints) {
-        let p = self.base.inverse().compose(&self.arm.tcp(&q)).to_pose6();
-        self.start = [p[0] * 1e3, p[1] * 1e3, p[2] * 1e3, p[3].to_degrees(), p[4].to_degrees(), p[5].to_degrees()];
+        self.start = KukaPose::from_pose(&self.base.inverse().compose(&self.arm.tcp(&q))).to_array();
         self.start_joints = q;
     }
 }
@@ -282,7 +276,7 @@ impl MockController {
         // (a robot restarted off home stands where it stopped).
         let q0 = cfg
             .arm
-            .inverse_near(&cfg.base.compose(&kuka_pose(&cfg.start)), &cfg.start_joints)
+            .inverse_near(&cfg.base.compose(&KukaPose::from_array(cfg.start).to_pose()), &cfg.start_joints)
             .unwrap_or(cfg.start_joints);
         let line = VecDeque::from(vec![q0; cfg.dead_time_cycles as usize]);
         let dt = cfg.cycle_ms as f64 * 1e-3;
@@ -354,7 +348,9 @@ impl MockController {
     /// there through the dead time and the lag.
     pub fn move_start(&mut self, start: [f64; 6]) {
         self.cfg.start = start;
-        if let Ok(q) = self.cfg.arm.inverse_near(&self.cfg.base.compose(&kuka_pose(&start)), &self.q_cmd) {
+        if let Ok(q) =
+            self.cfg.arm.inverse_near(&self.cfg.base.compose(&KukaPose::from_array(start).to_pose()), &self.q_cmd)
+        {
             self.q_start = q;
         }
     }
@@ -527,7 +523,11 @@ impl MockController {
     /// commanded joints, within the software limit switches and off the
     /// singular wrist; else the robot stops.
     fn command_joints(&mut self) {
-        match self.cfg.arm.inverse_near(&self.cfg.base.compose(&kuka_pose(&self.commanded)), &self.q_cmd) {
+        match self
+            .cfg
+            .arm
+            .inverse_near(&self.cfg.base.compose(&KukaPose::from_array(self.commanded).to_pose()), &self.q_cmd)
+        {
             Ok(q) => match self.cfg.arm.limits.check_position(&q) {
                 Ok(()) => self.q_cmd = q,
                 Err(v) => self.stopped = Some(StopReason::Axis(v)),
