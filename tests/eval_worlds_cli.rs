@@ -18,7 +18,7 @@ fn other_table_hit_dt(out: &std::process::Output) -> f64 {
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     let worlds = v["worlds"].as_array().unwrap();
-    assert_eq!(worlds.len(), 6);
+    assert_eq!(worlds.len(), 8);
     let w = worlds.iter().find(|w| w["world"] == "other-table").unwrap();
     let row =
         w["rows"].as_array().unwrap().iter().find(|r| r["method"] == "refined" && r["window"] == "pre_bounce").unwrap();

@@ -98,13 +98,18 @@ pub struct EvalStreamArgs {
     #[arg(long, default_value_t = 150.0)]
     pub rate_hz: f64,
     /// Fly the balls in a world of `topspin eval worlds` (linear-weak,
-    /// linear-strong, saturating, crisis, heavy-air, other-table) instead of
+    /// linear-strong, saturating, crisis, heavy-air, other-table, and the
+    /// lift measured on real balls: real-launcher, real-rally) instead of
     /// the calibration's own.
     #[arg(long, value_name = "NAME")]
     pub world: Option<String>,
-    /// The estimator learns nothing across the session (drag, table).
+    /// The estimator learns nothing across the session (drag, table, spin).
     #[arg(long)]
     pub no_learning: bool,
+    /// The estimator learns the drag and the table, not the spin the
+    /// table meets per unit of the spin a flight shows.
+    #[arg(long)]
+    pub no_spin_learning: bool,
     /// Every world (and the calibration's own) as one session of --balls
     /// balls, the EKF with the session learning on and off side by side:
     /// at the net, 0.25 s and 0.15 s before the hit.
@@ -282,6 +287,7 @@ fn run_stream(a: EvalStreamArgs) -> anyhow::Result<()> {
         rate_hz: a.rate_hz,
         world,
         learn: !a.no_learning,
+        learn_spin: !a.no_spin_learning,
         launcher: a.launcher,
         same_lift: a.same_lift,
         ..Default::default()
@@ -316,10 +322,34 @@ fn run_stream(a: EvalStreamArgs) -> anyhow::Result<()> {
             r.source, r.hit_err_mm.median, r.hit_err_mm.p90, r.hit_dt_ms.median, r.hit_dt_ms.p90, r.missing
         );
     }
+    println!(
+        "\nThe EKF's signed hit-time error per ball type (plan − truth, ms: positive is late), median and \
+         90th percentile, split by the plan made before or after the true bounce (median, number of balls), \
+         and the median time of the plan after the bounce:\n"
+    );
+    println!("| lead | ball | all: median (p90) | before the bounce | after it | plan − bounce ms |");
+    println!("|---|---|---|---|---|---|");
+    let signed = |s: &topspin_core::stats::Summary| {
+        if s.n == 0 { "–".to_owned() } else { format!("{:+.1} ({})", s.median, s.n) }
+    };
+    for r in &report.timing {
+        println!(
+            "| {:.2} s | {} | {:+.1} ({:+.1}) | {} | {} | {:+.0} |",
+            r.lead_s,
+            r.setting,
+            r.signed_dt_ms.median,
+            r.signed_dt_ms.p90,
+            signed(&r.before_bounce_ms),
+            signed(&r.after_bounce_ms),
+            r.plan_after_bounce_ms.median
+        );
+    }
     let l = &report.learned;
     println!(
         "\nWorld: {}{}. The EKF's session {}: drag × {:.3} of the calibration, table e {:.3}, μ {:.3} \
-         (from {} bounces), velocity σ left after a bounce {:.2}, {:.2}, {:.2} m/s (x, y, z).",
+         (from {} bounces, {} unexplained), velocity σ left after a bounce {:.2}, {:.2}, {:.2} m/s (x, y, z), \
+         spin the table meets per unit of the flight's × {:.2}, {:.2}, {:.2}, {:.2} at S {:?} (σ of its log \
+         {:.2}, {:.2}, {:.2}, {:.2}).",
         setup.world.unwrap_or("the calibration's own"),
         if setup.world.is_some() && (setup.launcher || setup.same_lift) {
             format!(", {}", world_balls(&setup))
@@ -331,9 +361,19 @@ fn run_stream(a: EvalStreamArgs) -> anyhow::Result<()> {
         l.restitution,
         l.friction,
         l.bounces,
+        l.unexplained,
         l.bounce_vel[0].sqrt(),
         l.bounce_vel[1].sqrt(),
-        l.bounce_vel[2].sqrt()
+        l.bounce_vel[2].sqrt(),
+        l.spin_scale[0],
+        l.spin_scale[1],
+        l.spin_scale[2],
+        l.spin_scale[3],
+        topspin_core::estimator::spin_prior::SPIN_BIN_CENTRES,
+        l.spin_share[0],
+        l.spin_share[1],
+        l.spin_share[2],
+        l.spin_share[3]
     );
     Ok(())
 }

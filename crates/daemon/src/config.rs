@@ -185,12 +185,22 @@ pub struct EstimatorSection {
     /// Weight of a ball's own drag, read from its flight, against the
     /// session's for the rest of that flight, 0..=1.
     pub ball_drag_weight: f64,
+    /// With `learn_session`: learn the spin the table meets per unit of
+    /// the spin a flight shows, the next balls' spin prior (false: every
+    /// ball bounces with the spin its flight showed). It starts anew with
+    /// every start of the daemon.
+    #[serde(default = "default_learn_spin")]
+    pub learn_spin: bool,
+}
+
+fn default_learn_spin() -> bool {
+    LearnConfig::default().spin
 }
 
 impl Default for EstimatorSection {
     fn default() -> Self {
         let l = LearnConfig::default();
-        EstimatorSection { learn_session: l.enabled, ball_drag_weight: l.ball_drag_weight }
+        EstimatorSection { learn_session: l.enabled, ball_drag_weight: l.ball_drag_weight, learn_spin: l.spin }
     }
 }
 
@@ -541,7 +551,11 @@ impl DaemonConfig {
     pub fn estimator_config(&self) -> EstimatorConfig {
         let mut cfg = EstimatorConfig::default().with_noise(self.tracker_noise_m());
         cfg.learn = if self.estimator.learn_session {
-            LearnConfig { ball_drag_weight: self.estimator.ball_drag_weight, ..LearnConfig::default() }
+            LearnConfig {
+                ball_drag_weight: self.estimator.ball_drag_weight,
+                spin: self.estimator.learn_spin,
+                ..LearnConfig::default()
+            }
         } else {
             LearnConfig::OFF
         };

@@ -40,11 +40,26 @@ pub struct EkfNoise {
     pub bounce_vel: Vec3,
     /// Extra spin variance at a bounce, (rad/s)².
     pub bounce_spin: f64,
+    /// σ of the spin's size just before a bounce, as a share of it, added
+    /// along the spin before the contact: a flight read through a lift
+    /// that saturates cannot tell a fast spin from a medium one, and the
+    /// bounce can (its kick). The first samples after the bounce then move
+    /// the velocity as far as that spin's kick is uncertain. 0 by default;
+    /// a session learning the spin sets it per ball
+    /// ([`super::spin_prior::SpinPrior::share_at`]).
+    pub bounce_spin_share: f64,
 }
 
 impl Default for EkfNoise {
     fn default() -> Self {
-        EkfNoise { measurement: 0.002, accel: 0.005, spin: 1.0, bounce_vel: Vec3::repeat(0.05), bounce_spin: 400.0 }
+        EkfNoise {
+            measurement: 0.002,
+            accel: 0.005,
+            spin: 1.0,
+            bounce_vel: Vec3::repeat(0.05),
+            bounce_spin: 400.0,
+            bounce_spin_share: 0.0,
+        }
     }
 }
 
@@ -83,6 +98,9 @@ pub struct Ekf {
     /// from the state's uncertainty before it (through the bounce's
     /// Jacobian), before [`EkfNoise::bounce_vel`] is added.
     pub contact_vel_var: Vec3,
+    /// The variance of the spin's size at that contact, as a share of
+    /// it squared (before [`EkfNoise::bounce_spin_share`] is added).
+    pub contact_spin_share_var: f64,
 }
 
 fn state_of(x: &V9) -> BallState {
@@ -102,7 +120,16 @@ impl Ekf {
             p[(k + 3, k + 3)] = vel_std * vel_std;
             p[(k + 6, k + 6)] = spin_std * spin_std;
         }
-        Ekf { t, x: vec_of(state), p, noise, bounces: 0, last_contact: None, contact_vel_var: Vec3::zeros() }
+        Ekf {
+            t,
+            x: vec_of(state),
+            p,
+            noise,
+            bounces: 0,
+            last_contact: None,
+            contact_vel_var: Vec3::zeros(),
+            contact_spin_share_var: 0.0,
+        }
     }
 
     /// The state `x` as a ball state.
@@ -165,13 +192,16 @@ impl Ekf {
     fn bounce_jacobian(prop: &Propagator, before: &BallState) -> M9 {
         let b = &prop.bounce;
         let a = b.alpha(&before.vel, &before.spin);
-        let r = b.radius;
+        // The contact meets m·ω and hands back ω⁺/m (m the table's spin
+        // scale): ∂v⁺/∂ω scales by m, ∂ω⁺/∂v by 1/m.
+        let (m, r) = (b.spin_scale, b.radius);
         let mut j = M9::identity();
-        let k = 1.5 * a / r;
+        let k = 1.5 * a / (r * m);
+        let ar = a * r * m;
         #[rustfmt::skip]
         let block = SMatrix::<f64, 6, 6>::from_row_slice(&[
-            1.0 - a, 0.0, 0.0,            0.0, a * r, 0.0,
-            0.0, 1.0 - a, 0.0,            -a * r, 0.0, 0.0,
+            1.0 - a, 0.0, 0.0,            0.0, ar, 0.0,
+            0.0, 1.0 - a, 0.0,            -ar, 0.0, 0.0,
             0.0, 0.0, -b.restitution,     0.0, 0.0, 0.0,
             0.0, -k, 0.0,                 1.0 - 1.5 * a, 0.0, 0.0,
             k, 0.0, 0.0,                  0.0, 1.0 - 1.5 * a, 0.0,
@@ -206,6 +236,21 @@ impl Ekf {
             self.t = now;
             match event {
                 Event::Bounce { t: tb, before } => {
+                    let w = before.spin;
+                    self.contact_spin_share_var = if w.norm() > 1e-9 {
+                        (w.transpose() * self.p.fixed_view::<3, 3>(6, 6) * w)[0] / w.norm_squared().powi(2)
+                    } else {
+                        0.0
+                    };
+                    // A spin whose size is uncertain by the share beyond
+                    // the filter's own reading: its kick moves the
+                    // velocity after the contact, and the first samples
+                    // after it tell how far.
+                    let share = self.noise.bounce_spin_share;
+                    if share > 0.0 {
+                        let mut spin_cov = self.p.fixed_view_mut::<3, 3>(6, 6);
+                        spin_cov += w * w.transpose() * (share * share);
+                    }
                     let j = Self::bounce_jacobian(prop, &before);
                     self.p = j * self.p * j.transpose();
                     self.contact_vel_var = Vec3::new(self.p[(3, 3)], self.p[(4, 4)], self.p[(5, 5)]);

@@ -18,6 +18,7 @@ pub mod aim;
 pub mod ekf;
 pub mod session;
 mod smooth;
+pub mod spin_prior;
 pub mod stroke;
 
 use heapless::Vec as HVec;
@@ -211,6 +212,18 @@ pub enum EstimatorEvent {
         /// σ of the velocity just after a bounce that the table leaves
         /// unexplained, per axis (x, y, z), m/s.
         bounce_sigma: [f32; 3],
+        /// The spin the table meets per unit of the spin a flight shows,
+        /// per bin of the flight's spin parameter
+        /// ([`spin_prior::SPIN_BIN_CENTRES`]): the next balls' spin prior.
+        spin_scale: [f32; spin_prior::SPIN_BINS],
+    },
+    /// A bounce no table explains (a net-cord ball, the table's edge, a
+    /// tracker jump at the bounce): the session learned nothing from it.
+    BounceUnexplained {
+        /// Id of the track.
+        trajectory: u32,
+        /// Time of the bounce, s.
+        t: f64,
     },
 }
 
@@ -356,10 +369,28 @@ impl Estimator {
         let (cfg, sigma) = (self.cfg.learn, self.cfg.noise.measurement);
         if let Some((after, after_var)) = session::velocity_at(&track.after, t_bounce, cfg.min_samples, sigma) {
             // Against the table this ball flew with, before it learns from it.
-            let residual = after - track.prop.bounce.apply(&before).vel;
+            let table = track.prop.bounce;
+            let residual = after - table.apply(&before).vel;
             let explained = track.ekf.contact_vel_var + Vec3::repeat(after_var);
+            // Against the session's own table: what it needs to explain the kick.
+            let var = Vec3::repeat(after_var) + self.session.bounce_noise() + explained;
+            let plain = self.session.bounce_model(&self.prop.bounce);
+            let s_shown = session::spin_parameter(&before, table.radius);
+            let scale = self.session.spin.scale_at(s_shown);
+            if !(session::bounce_explained(&before, &after, &var, &table)
+                || session::bounce_explained(&before, &after, &var, &plain.with_spin_scale(scale)))
+            {
+                self.session.unexplained = self.session.unexplained.saturating_add(1);
+                out.push(EstimatorEvent::BounceUnexplained { trajectory: track.id, t: t_bounce });
+                return;
+            }
             self.session.take_bounce_residual(&residual, &explained, &cfg);
-            self.session.take_bounce(&before, &after, self.prop.bounce.radius, &cfg);
+            if cfg.spin {
+                self.session.spin.take(&before, &after, &var, track.ekf.contact_spin_share_var, &plain);
+            }
+            // The table, from the spin it met.
+            let met = crate::physics::BallState { spin: before.spin * self.session.spin.scale_at(s_shown), ..before };
+            self.session.take_bounce(&met, &after, self.prop.bounce.radius, &cfg);
             let s = &self.session;
             out.push(EstimatorEvent::Learned {
                 trajectory: track.id,
@@ -367,6 +398,7 @@ impl Estimator {
                 restitution: s.restitution.value as f32,
                 friction: s.friction.value as f32,
                 bounce_sigma: s.bounce_noise().map(|v| v.sqrt() as f32).into(),
+                spin_scale: s.spin.scales().map(|v| v as f32),
             });
         }
     }
@@ -481,7 +513,12 @@ impl Estimator {
         let spin_cov = (nalgebra::Matrix3::identity() - along) * self.cfg.initial_spin_std.powi(2)
             + along * self.cfg.spin_prior_along_velocity.powi(2);
         ekf.p.fixed_view_mut::<3, 3>(6, 6).copy_from(&spin_cov);
-        let prop = self.session_propagator();
+        let mut prop = self.session_propagator();
+        if self.cfg.learn.enabled && self.cfg.learn.spin {
+            let s = session::spin_parameter(&ekf.state(), prop.bounce.radius);
+            prop.bounce = prop.bounce.with_spin_scale(self.session.spin.scale_at(s));
+            ekf.noise.bounce_spin_share = self.session.spin.share_at(s);
+        }
         for s in &inliers {
             ekf.predict(&prop, s.t);
             ekf.update(&s.pos);
@@ -516,6 +553,12 @@ impl Estimator {
         let track = self.track.as_mut().expect("tracking");
         if sample.t <= track.ekf.t {
             return; // out of order or duplicate
+        }
+        if track.spin_before_bounce.is_none() && cfg.learn.enabled && cfg.learn.spin {
+            // The spin the table will meet, for the flight shown so far.
+            let s = session::spin_parameter(&track.ekf.state(), self.prop.bounce.radius);
+            track.prop.bounce = track.prop.bounce.with_spin_scale(self.session.spin.scale_at(s));
+            track.ekf.noise.bounce_spin_share = self.session.spin.share_at(s);
         }
         let mut trial = track.ekf;
         if let Some(tb) = trial.predict(&track.prop, sample.t) {
@@ -633,8 +676,11 @@ impl Estimator {
             out.push(EstimatorEvent::Withheld { trajectory: track.id, t, reason });
             return;
         }
-        // The spin the ball flew with (before its bounce) decides the stroke.
-        let spin = track.spin_before_bounce.unwrap_or(state.spin);
+        // The spin the ball flew with (before its bounce) decides the
+        // stroke: the spin the table meets, not the flight's reading of it.
+        let scale = track.prop.bounce.spin_scale;
+        let spin = track.spin_before_bounce.unwrap_or(state.spin) * scale;
+        let hit_state = crate::physics::BallState { spin: hit.state.spin * scale, ..hit.state };
         self.plan_seq = self.plan_seq.wrapping_add(1);
         let tau = hit.t - t;
         let p = &track.ekf.p;
@@ -656,7 +702,9 @@ impl Estimator {
                     Some(m) => self.aim_bounds.within(aim::ArmReach::at(m, p.y, p.z)),
                     None => self.aim_bounds,
                 };
-                let a = aim::aim(&bounds, target, &track.prop, &self.racket, &hit.state, tilt0, warm, aim::AIM_BUDGET);
+                // The return flies with the spin the rubber gave it.
+                let prop = Propagator { bounce: track.prop.bounce.with_spin_scale(1.0), ..track.prop };
+                let a = aim::aim(&bounds, target, &prop, &self.racket, &hit_state, tilt0, warm, aim::AIM_BUDGET);
                 track.aim = Some(a);
                 let roll = match bounds.arm {
                     Some(arm) => arm.roll(a.tilt),

@@ -9,6 +9,12 @@
 //! ball moves a value by at most a fixed step), with a fixed memory, and
 //! reset with the estimator (a restart or a new configuration).
 //!
+//! It also learns the spin the table meets per unit of the spin a flight
+//! shows ([`Session::spin`], [`super::spin_prior`]), the next balls' spin
+//! prior. A bounce no table explains (a net-cord ball, the table's edge, a
+//! tracker jump) teaches nothing ([`Session::unexplained`],
+//! [`bounce_explained`]).
+//!
 //! The measurements are bounded in work: the session's drag once per ball
 //! when it bounces (what the ball's batches read, `super::smooth`; where
 //! none has, one cubic over the window, [`drag_from_flight`], which reads
@@ -18,6 +24,7 @@
 //! [`LearnConfig::ball_drag_every`] samples before its bounce, until a
 //! batch has read it.
 
+use super::spin_prior::SpinPrior;
 use crate::fit::Sample;
 use crate::fit::poly::Cubic;
 use crate::physics::{BallState, BounceModel, FlightModel, Vec3};
@@ -38,18 +45,34 @@ pub struct LearnConfig {
     /// The ball's own drag is reread every this many accepted samples
     /// before its bounce (and at the bounce).
     pub ball_drag_every: usize,
+    /// Learn the spin the table meets per unit of the spin a flight shows
+    /// ([`Session::spin_scale`]), and bounce the next balls with it.
+    pub spin: bool,
 }
 
 impl Default for LearnConfig {
     fn default() -> Self {
-        LearnConfig { enabled: true, memory: 24, min_samples: 12, ball_drag_weight: 0.5, ball_drag_every: 8 }
+        LearnConfig {
+            enabled: true,
+            memory: 24,
+            min_samples: 12,
+            ball_drag_weight: 0.5,
+            ball_drag_every: 8,
+            spin: true,
+        }
     }
 }
 
 impl LearnConfig {
     /// Nothing learned: every ball flies with the calibration.
-    pub const OFF: LearnConfig =
-        LearnConfig { enabled: false, memory: 8, min_samples: 12, ball_drag_weight: 0.0, ball_drag_every: 8 };
+    pub const OFF: LearnConfig = LearnConfig {
+        enabled: false,
+        memory: 8,
+        min_samples: 12,
+        ball_drag_weight: 0.0,
+        ball_drag_every: 8,
+        spin: false,
+    };
 
     /// The drag multiplier one ball flies with: the session's, moved
     /// towards the ball's own measurement by [`Self::ball_drag_weight`],
@@ -107,7 +130,15 @@ pub struct Session {
     /// a bounce, per axis, (m/s)² (the filter's
     /// [`super::ekf::EkfNoise::bounce_vel`]; bounded 0.002–0.5).
     pub bounce_vel: [Learned; 3],
+    /// The spin the table meets per unit of the spin a flight shows.
+    pub spin: SpinPrior,
+    /// Bounces no table explained (learned nothing from).
+    pub unexplained: u32,
 }
+
+/// χ² (3 dof) at 99.9 %: a bounce whose velocity after it lies farther
+/// from every table tried is not explained.
+pub const BOUNCE_GATE_CHI2: f64 = 16.27;
 
 impl Session {
     /// A session that starts from the calibration's table and the
@@ -118,6 +149,8 @@ impl Session {
             restitution: Learned::new(bounce.restitution, (0.7, 0.99), 0.08),
             friction: Learned::new(bounce.friction, (0.05, 0.6), 0.1),
             bounce_vel: [0, 1, 2].map(|k| Learned::new(bounce_vel_start[k], (0.002, 0.5), 0.1)),
+            spin: SpinPrior::default(),
+            unexplained: 0,
         }
     }
 
@@ -138,7 +171,8 @@ impl Session {
         }
     }
 
-    /// The table as learned so far.
+    /// The table as learned so far (spin scale 1: a ball's own comes
+    /// with its flight, [`Self::spin_scale_at`]).
     pub fn bounce_model(&self, calibrated: &BounceModel) -> BounceModel {
         BounceModel::new(self.restitution.value, self.friction.value, calibrated.radius)
     }
@@ -183,6 +217,20 @@ pub(crate) fn drag_from_flight(samples: &[Sample], flight: &FlightModel, min_sam
         xx += x * x;
     }
     (xx > 0.0).then(|| xy / xx).filter(|s| s.is_finite() && *s > 0.0)
+}
+
+/// The spin parameter S = r‖ω‖/‖v‖ of a state.
+pub(crate) fn spin_parameter(state: &BallState, radius: f64) -> f64 {
+    radius * state.spin.norm() / state.vel.norm().max(1e-9)
+}
+
+/// Whether `table` explains a bounce: the squared Mahalanobis distance
+/// of the velocity after it from the table's prediction, `var` per axis,
+/// within [`BOUNCE_GATE_CHI2`].
+pub(crate) fn bounce_explained(before: &BallState, after: &Vec3, var: &Vec3, table: &BounceModel) -> bool {
+    let v = table.apply(before).vel;
+    let d2: f64 = (0..3).map(|k| (v[k] - after[k]).powi(2) / var[k].max(1e-6)).sum();
+    d2.is_finite() && d2 <= BOUNCE_GATE_CHI2
 }
 
 /// The velocity at `t` of a cubic through `samples` (after a bounce), and
@@ -235,6 +283,17 @@ mod tests {
         assert_eq!(table_from_bounce(&rolling, &after, 0.02).unwrap().1, None);
         // Not falling into the table: nothing.
         assert_eq!(table_from_bounce(&BallState { vel: Vec3::new(5.0, 0.0, 0.1), ..rolling }, &after, 0.02), None);
+    }
+
+    #[test]
+    fn a_bounce_no_table_explains_is_told_apart() {
+        let table = BounceModel::new(0.92, 0.2, 0.02);
+        let var = Vec3::repeat(0.03f64.powi(2));
+        let before = BallState::new(Vec3::zeros(), Vec3::new(5.0, 0.0, -3.0), Vec3::new(0.0, -300.0, 0.0));
+        let after = table.apply(&before).vel;
+        assert!(bounce_explained(&before, &after, &var, &table));
+        // A net-cord ball, or a tracker jump at the bounce.
+        assert!(!bounce_explained(&before, &(after + Vec3::new(-2.0, 1.0, 0.0)), &var, &table));
     }
 
     #[test]

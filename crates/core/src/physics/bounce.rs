@@ -4,6 +4,12 @@
 //! Slip at the contact v_T = (v_x − rω_y, v_y + rω_x);
 //! α = μ(1+e)|v_z| / ‖v_T‖, capped at 2/5 (the ball leaves rolling);
 //! v⁺ = A v⁻ + B ω⁻, ω⁺ = C v⁻ + D ω⁻ with the matrices below.
+//!
+//! A filter reads spin from a flight through its own lift curve; a real
+//! ball's lift saturates, so the spin the table meets may be a multiple of
+//! that reading ([`BounceModel::spin_scale`], learned per session by the
+//! estimator): the contact acts on the scaled spin and hands the spin back
+//! in the flight's units. The simulator's tables have a scale of 1.
 
 use super::{BallState, Vec3};
 
@@ -16,6 +22,9 @@ pub struct BounceModel {
     pub friction: f64,
     /// Ball radius r in m.
     pub radius: f64,
+    /// The spin at the contact per unit of the flight model's spin (1: the
+    /// flight's spin is the ball's).
+    pub spin_scale: f64,
 }
 
 /// The cap on α: at α = 2/5 the ball leaves the table rolling (no slip).
@@ -24,12 +33,17 @@ pub(crate) const ROLLING_ALPHA: f64 = 0.4;
 impl BounceModel {
     /// A contact model from restitution e, friction μ and ball radius r (m).
     pub fn new(restitution: f64, friction: f64, radius: f64) -> Self {
-        BounceModel { restitution, friction, radius }
+        BounceModel { restitution, friction, radius, spin_scale: 1.0 }
+    }
+
+    /// This table meeting `scale` times the flight model's spin.
+    pub fn with_spin_scale(self, scale: f64) -> Self {
+        BounceModel { spin_scale: scale, ..self }
     }
 
     /// The friction ratio α of this impact (2/5 when the ball rolls).
     pub(crate) fn alpha(&self, vel: &Vec3, spin: &Vec3) -> f64 {
-        let r = self.radius;
+        let r = self.radius * self.spin_scale;
         let slip_x = vel.x - r * spin.y;
         let slip_y = vel.y + r * spin.x;
         let slip = slip_x.hypot(slip_y);
@@ -40,12 +54,13 @@ impl BounceModel {
     /// Velocity and spin just after an impact with velocity `vel` (v_z < 0)
     /// and spin `spin` just before it. The position is unchanged.
     pub(crate) fn apply(&self, state: &BallState) -> BallState {
-        let (v, w, r, e) = (state.vel, state.spin, self.radius, self.restitution);
-        let a = self.alpha(&v, &w);
+        let (v, r, e) = (state.vel, self.radius, self.restitution);
+        let a = self.alpha(&v, &state.spin);
+        let w = state.spin * self.spin_scale;
         let vel = Vec3::new((1.0 - a) * v.x + a * r * w.y, (1.0 - a) * v.y - a * r * w.x, -e * v.z);
         let k = 1.5 * a / r;
         let spin = Vec3::new(-k * v.y + (1.0 - 1.5 * a) * w.x, k * v.x + (1.0 - 1.5 * a) * w.y, w.z);
-        BallState { pos: state.pos, vel, spin }
+        BallState { pos: state.pos, vel, spin: spin / self.spin_scale }
     }
 }
 
@@ -114,5 +129,21 @@ mod tests {
         let back = m.apply(&BallState::new(Vec3::zeros(), v, Vec3::new(0.0, -600.0, 0.0)));
         assert!(top.vel.x > back.vel.x);
         assert!((top.vel.z - 2.7).abs() < 1e-12);
+    }
+
+    /// A table meeting twice the flight's spin bounces a ball as the
+    /// plain table bounces the ball with twice the spin, and hands the
+    /// spin back in the flight's units.
+    #[test]
+    fn a_spin_scale_is_the_same_bounce_of_the_scaled_spin() {
+        let plain = BounceModel::new(0.92, 0.2, R);
+        let scaled = plain.with_spin_scale(2.0);
+        for w in [Vec3::new(0.0, 150.0, 10.0), Vec3::new(40.0, -300.0, 0.0), Vec3::new(0.0, 400.0, 0.0)] {
+            let s = BallState::new(Vec3::zeros(), Vec3::new(5.0, 0.4, -3.0), w);
+            let (a, b) = (scaled.apply(&s), plain.apply(&BallState { spin: w * 2.0, ..s }));
+            assert!((a.vel - b.vel).norm() < 1e-12 && (a.spin * 2.0 - b.spin).norm() < 1e-9, "{a:?} {b:?}");
+        }
+        let s = BallState::new(Vec3::zeros(), Vec3::new(5.0, 0.0, -3.0), Vec3::new(0.0, 200.0, 0.0));
+        assert_eq!(plain.with_spin_scale(1.0).apply(&s), plain.apply(&s));
     }
 }

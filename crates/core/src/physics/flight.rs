@@ -3,7 +3,8 @@
 //! k_D = C_D ρ A / (2m) (the paper prints it with a stray minus sign; drag
 //! opposes motion). The Magnus coefficient k_M = C_M ρ A r / (2m) may fall
 //! with the spin parameter S = r‖ω‖/‖v‖, as measured for real balls
-//! ([`LiftModel::Saturating`]); the paper's constant is
+//! ([`LiftModel::Saturating`], or a measured curve C_L(S) itself,
+//! [`LiftModel::Measured`]); the paper's constant is
 //! [`LiftModel::Constant`]. Spin is constant during flight.
 
 use serde::{Deserialize, Serialize};
@@ -48,6 +49,74 @@ pub enum LiftModel {
         /// Width (standard deviation) of the valley in S.
         width: f64,
     },
+    /// A lift coefficient measured on real balls: C_L(S) linear between
+    /// the points (S_i, C_L_i), from C_L(0) = 0 to the first point and
+    /// flat beyond the last; C_M = C_L / S. No law is assumed, so a curve
+    /// that saturates the way real balls do (docs/physics.md) is flown as
+    /// it was measured.
+    Measured {
+        /// Spin parameters S_i of the points, increasing.
+        s: LiftPoints,
+        /// Lift coefficients C_L at them.
+        c_l: LiftPoints,
+    },
+}
+
+/// Up to [`LiftPoints::CAP`] numbers of a measured lift curve, in a fixed
+/// array so that a flight model stays `Copy` (written in TOML as a list).
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub struct LiftPoints {
+    values: [f64; LiftPoints::CAP],
+    len: u8,
+}
+
+impl LiftPoints {
+    /// The most points a curve holds.
+    pub const CAP: usize = 8;
+
+    /// The points in `values`, or `None` where there are none or more
+    /// than [`Self::CAP`].
+    pub fn new(values: &[f64]) -> Option<Self> {
+        if values.is_empty() || values.len() > Self::CAP {
+            return None;
+        }
+        let mut v = [0.0; Self::CAP];
+        v[..values.len()].copy_from_slice(values);
+        Some(LiftPoints { values: v, len: values.len() as u8 })
+    }
+
+    /// The numbers held.
+    pub fn as_slice(&self) -> &[f64] {
+        &self.values[..usize::from(self.len)]
+    }
+}
+
+impl Serialize for LiftPoints {
+    fn serialize<S: serde::Serializer>(&self, ser: S) -> Result<S::Ok, S::Error> {
+        self.as_slice().serialize(ser)
+    }
+}
+
+impl<'de> Deserialize<'de> for LiftPoints {
+    fn deserialize<D: serde::Deserializer<'de>>(de: D) -> Result<Self, D::Error> {
+        let v = Vec::<f64>::deserialize(de)?;
+        LiftPoints::new(&v).ok_or_else(|| {
+            serde::de::Error::custom(format!("a lift curve has 1 to {} points, not {}", LiftPoints::CAP, v.len()))
+        })
+    }
+}
+
+/// C_L at `s` on the measured curve (`s` and `c_l` of equal length, `s`
+/// increasing: [`super::PhysicsParams::validate`] checks it).
+fn measured_c_l(s_pts: &[f64], c_l: &[f64], s: f64) -> f64 {
+    let (mut s0, mut c0) = (0.0, 0.0);
+    for (&s1, &c1) in s_pts.iter().zip(c_l) {
+        if s <= s1 {
+            return if s1 > s0 { c0 + (c1 - c0) * (s - s0) / (s1 - s0) } else { c1 };
+        }
+        (s0, c0) = (s1, c1);
+    }
+    c0
 }
 
 impl LiftModel {
@@ -60,6 +129,10 @@ impl LiftModel {
                 let z = (s - s_valley) / width;
                 c_m / (1.0 + s / s_half) * (1.0 - depth * (-0.5 * z * z).exp())
             }
+            LiftModel::Measured { s: s_pts, c_l } => {
+                let (s_pts, c_l) = (s_pts.as_slice(), c_l.as_slice());
+                if s > 1e-9 { measured_c_l(s_pts, c_l, s) / s } else { c_l[0] / s_pts[0].max(1e-9) }
+            }
         }
     }
 
@@ -67,7 +140,13 @@ impl LiftModel {
     pub fn c_m0(&self) -> f64 {
         match *self {
             LiftModel::Constant { c_m } | LiftModel::Saturating { c_m, .. } | LiftModel::Crisis { c_m, .. } => c_m,
+            LiftModel::Measured { .. } => self.c_m(0.0),
         }
+    }
+
+    /// The lift coefficient C_L = C_M·S at `s`.
+    pub fn c_l(&self, s: f64) -> f64 {
+        self.c_m(s) * s
     }
 }
 
@@ -143,7 +222,7 @@ impl FlightModel {
                 let d = speed * s_half + self.radius * w;
                 if speed > 1e-9 { self.lift_scale * c_m * (speed * s_half / d) } else { self.lift_scale * c_m }
             }
-            LiftModel::Crisis { .. } => {
+            LiftModel::Crisis { .. } | LiftModel::Measured { .. } => {
                 let s = if speed > 1e-9 { self.radius * w / speed } else { 0.0 };
                 self.lift_scale * self.lift.c_m(s)
             }
@@ -231,7 +310,28 @@ impl FlightModel {
             }
             // Not monotonic in ω: no unique inverse.
             LiftModel::Crisis { .. } => None,
+            LiftModel::Measured { .. } => self.spin_by_bisection(spin_linear, speed),
         }
+    }
+
+    /// [`Self::spin_from_linear`] for any lift whose force grows with the
+    /// spin: bisection on ‖ω‖ up to 3000 rad/s (far beyond real balls).
+    fn spin_by_bisection(&self, spin_linear: &Vec3, speed: f64) -> Option<Vec3> {
+        let m = spin_linear.norm();
+        if m < 1e-9 {
+            return Some(*spin_linear);
+        }
+        let force = |w: f64| self.k_m_at(speed, w) * w;
+        let target = self.k_m0() * m;
+        let (mut lo, mut hi) = (0.0, 3000.0);
+        if force(hi) < target {
+            return None;
+        }
+        for _ in 0..48 {
+            let mid = 0.5 * (lo + hi);
+            if force(mid) < target { lo = mid } else { hi = mid }
+        }
+        Some(spin_linear * (0.5 * (lo + hi) / m))
     }
 }
 
@@ -288,5 +388,26 @@ mod tests {
         let w_lin = w * (m.k_m(&v, &w) / m.k_m0());
         let back = m.spin_from_linear(&w_lin, v.norm()).unwrap();
         assert!((back - w).norm() < 1e-9);
+    }
+
+    #[test]
+    fn a_measured_curve_is_flown_as_measured() {
+        let pts = |v: &[f64]| LiftPoints::new(v).unwrap();
+        let lift = LiftModel::Measured { s: pts(&[0.2, 0.4, 0.75]), c_l: pts(&[0.19, 0.24, 0.25]) };
+        assert!((lift.c_l(0.1) - 0.095).abs() < 1e-12);
+        assert!((lift.c_l(0.3) - 0.215).abs() < 1e-12);
+        assert_eq!(lift.c_l(2.0), 0.25);
+        assert!((lift.c_m0() - 0.95).abs() < 1e-12);
+        let mut p = PhysicsParams::paper();
+        p.lift = lift;
+        let m = p.flight_model();
+        let v = Vec3::new(7.0, 0.0, 1.0);
+        let w = Vec3::new(10.0, -100.0, 30.0);
+        let w_lin = w * (m.k_m(&v, &w) / m.k_m0());
+        let back = m.spin_from_linear(&w_lin, v.norm()).unwrap();
+        assert!((back - w).norm() < 1e-6, "{back:?}");
+        // More bend than the flat top of the curve can give: no spin does it.
+        assert_eq!(m.spin_from_linear(&(w_lin * 50.0), v.norm()), None);
+        assert!(LiftPoints::new(&[0.0; 9]).is_none() && LiftPoints::new(&[]).is_none());
     }
 }

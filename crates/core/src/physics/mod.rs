@@ -14,7 +14,7 @@ pub mod sensitivity;
 pub mod table;
 
 pub use bounce::BounceModel;
-pub use flight::{FlightModel, FlightScales, LiftModel};
+pub use flight::{FlightModel, FlightScales, LiftModel, LiftPoints};
 pub use params::{FlightVariation, PhysicsParams};
 pub use propagate::{Event, Propagator, StopAt};
 pub use racket::{Bat, Impact, RacketModel, RacketParams, Regime};

@@ -114,6 +114,22 @@ impl PhysicsParams {
                     return Err(InvalidParam { key, value });
                 }
             }
+            LiftModel::Measured { s, c_l } => {
+                let (s, c_l) = (s.as_slice(), c_l.as_slice());
+                if s.len() != c_l.len() {
+                    return Err(InvalidParam { key: "lift.c_l", value: c_l.len() as f64 });
+                }
+                let mut last = 0.0;
+                for &v in s {
+                    if !(v.is_finite() && v > last) {
+                        return Err(InvalidParam { key: "lift.s", value: v });
+                    }
+                    last = v;
+                }
+                if let Some(&v) = c_l.iter().find(|v| !(v.is_finite() && **v >= 0.0)) {
+                    return Err(InvalidParam { key: "lift.c_l", value: v });
+                }
+            }
             _ => {}
         }
         for (key, v) in [("flight_variation.drag", self.variation.drag), ("flight_variation.lift", self.variation.lift)]
@@ -171,5 +187,27 @@ mod tests {
         p = PhysicsParams::paper();
         p.mass = f64::NAN;
         assert_eq!(p.validate().unwrap_err().key, "mass");
+    }
+
+    #[test]
+    fn a_measured_lift_curve_is_checked_and_read_from_toml() {
+        let p: PhysicsParams = toml::from_str(
+            "mass = 0.0027\nradius = 0.02\ngravity = 9.81\nair_density = 1.29\ndrag_coefficient = 0.45\n\
+             restitution = 0.9\nfriction = 0.2\n[lift]\nmodel = \"measured\"\ns = [0.2, 0.4]\nc_l = [0.19, 0.24]\n",
+        )
+        .unwrap();
+        p.validate().unwrap();
+        assert!((p.lift.c_l(0.3) - 0.215).abs() < 1e-12);
+        let mut bad = p.clone();
+        bad.lift = LiftModel::Measured {
+            s: super::super::flight::LiftPoints::new(&[0.4, 0.2]).unwrap(),
+            c_l: super::super::flight::LiftPoints::new(&[0.19, 0.24]).unwrap(),
+        };
+        assert_eq!(bad.validate().unwrap_err().key, "lift.s");
+        bad.lift = LiftModel::Measured {
+            s: super::super::flight::LiftPoints::new(&[0.2]).unwrap(),
+            c_l: super::super::flight::LiftPoints::new(&[0.19, 0.24]).unwrap(),
+        };
+        assert_eq!(bad.validate().unwrap_err().key, "lift.c_l");
     }
 }

@@ -68,7 +68,7 @@ impl CalibParam {
             (CalibParam::Friction, _) => p.friction,
             (CalibParam::LiftCm, l) => l.c_m0(),
             (CalibParam::LiftSHalf, LiftModel::Saturating { s_half, .. } | LiftModel::Crisis { s_half, .. }) => s_half,
-            (CalibParam::LiftSHalf, LiftModel::Constant { .. }) => f64::NAN,
+            (CalibParam::LiftSHalf, LiftModel::Constant { .. } | LiftModel::Measured { .. }) => f64::NAN,
         }
     }
 
@@ -81,6 +81,8 @@ impl CalibParam {
                 LiftModel::Constant { c_m } | LiftModel::Saturating { c_m, .. } | LiftModel::Crisis { c_m, .. } => {
                     *c_m = v
                 }
+                // A measured curve is not searched: the calibration never sets one up.
+                LiftModel::Measured { .. } => {}
             },
             CalibParam::LiftSHalf => {
                 if let LiftModel::Saturating { s_half, .. } | LiftModel::Crisis { s_half, .. } = &mut p.lift {

@@ -33,6 +33,9 @@ pub struct StreamSetup {
     pub world: Option<&'static str>,
     /// The estimator learns drag and table across the session.
     pub learn: bool,
+    /// With `learn`: it learns the spin the table meets per unit of the
+    /// flight's, too.
+    pub learn_spin: bool,
     /// A world's balls come from a wheel launcher: spin axes perpendicular
     /// to the exit velocity (the worlds' own axes are skewed, as players
     /// make them).
@@ -53,6 +56,7 @@ impl Default for StreamSetup {
             gap: 1.0,
             world: None,
             learn: true,
+            learn_spin: true,
             launcher: false,
             same_lift: false,
         }
@@ -86,6 +90,70 @@ pub struct StreamReport {
     /// Errors of the latest plan made before the true net crossing.
     pub at_net: Vec<LeadRow>,
     pub by_lead: Vec<LeadRow>,
+    /// The EKF's signed hit-time error per ball type at [`TIMING_LEADS`].
+    pub timing: Vec<TypeTiming>,
+}
+
+/// Lead times of the per-type timing table, s before the true hit.
+pub const TIMING_LEADS: [f64; 2] = [0.25, 0.15];
+
+/// The EKF's signed hit-time error (plan − truth: positive is late) for
+/// one ball type at one lead, split by whether the plan was made before
+/// or after the ball's true bounce.
+#[derive(Clone, Debug, Serialize)]
+pub struct TypeTiming {
+    /// The launcher setting, e.g. `topspin-high`.
+    pub setting: String,
+    pub lead_s: f64,
+    /// All plans at that lead, ms.
+    pub signed_dt_ms: Summary,
+    /// Plans made before the bounce, ms.
+    pub before_bounce_ms: Summary,
+    /// Plans made after it, ms.
+    pub after_bounce_ms: Summary,
+    /// When the plan was made relative to the true bounce, ms (negative:
+    /// before it).
+    pub plan_after_bounce_ms: Summary,
+}
+
+/// Per ball type and lead: the signed error of the EKF's latest plan at
+/// that lead and where it lies relative to the bounce.
+fn timing_by_type(
+    plans: &[(usize, StrikePlan)],
+    balls: &[SimBall],
+    launches: &[f64],
+    reachable: &[bool],
+) -> Vec<TypeTiming> {
+    let mut rows = Vec::new();
+    for lead in TIMING_LEADS {
+        for setting in Setting::ALL {
+            let (mut all, mut before, mut after, mut rel) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+            for (k, ball) in balls.iter().enumerate().filter(|(k, b)| reachable[*k] && b.truth.setting == setting) {
+                let (Some(hit), Some(bounce)) = (ball.truth.hit.as_ref(), ball.truth.bounce.as_ref()) else {
+                    continue;
+                };
+                let t0 = launches[k];
+                let when = t0 + hit.t - lead;
+                let Some((_, p)) = plans.iter().rev().find(|(b, p)| *b == k && p.made_at.as_secs_f64() <= when) else {
+                    continue;
+                };
+                let dt = (p.hit_time.as_secs_f64() - (t0 + hit.t)) * 1e3;
+                let made = p.made_at.as_secs_f64() - (t0 + bounce.t);
+                all.push(dt);
+                rel.push(made * 1e3);
+                if made < 0.0 { before.push(dt) } else { after.push(dt) }
+            }
+            rows.push(TypeTiming {
+                setting: setting.to_string(),
+                lead_s: lead,
+                signed_dt_ms: Summary::of(&all),
+                before_bounce_ms: Summary::of(&before),
+                after_bounce_ms: Summary::of(&after),
+                plan_after_bounce_ms: Summary::of(&rel),
+            });
+        }
+    }
+    rows
 }
 
 /// The simulated balls and their launch times on one clock.
@@ -145,6 +213,9 @@ pub(crate) fn run_estimator(
         friction: s.friction.value,
         bounces: s.restitution.count,
         bounce_vel: s.bounce_noise().into(),
+        spin_scale: s.spin.scales(),
+        spin_share: s.spin.shares(),
+        unexplained: s.unexplained,
     };
     (plans, learned)
 }
@@ -163,6 +234,13 @@ pub struct SessionLearned {
     /// Variance of the velocity just after a bounce that the table model
     /// leaves unexplained, per axis, (m/s)² (the filter's bounce noise).
     pub bounce_vel: [f64; 3],
+    /// The spin the table meets per unit of the spin a flight shows, per
+    /// bin of the flight's spin parameter (`spin_prior::SPIN_BIN_CENTRES`).
+    pub spin_scale: [f64; 4],
+    /// How far one ball's scale strays from its bin's (σ of its log).
+    pub spin_share: [f64; 4],
+    /// Bounces no table explained.
+    pub unexplained: u32,
 }
 
 fn v3(a: [f64; 3]) -> Vec3 {
@@ -204,6 +282,7 @@ pub fn evaluate(cal: &Calibration, setup: &StreamSetup) -> StreamReport {
     let noise = setup.noise_mm * 1e-3;
     let mut base = EstimatorConfig::default().with_noise(noise);
     base.learn.enabled = setup.learn;
+    base.learn.spin = setup.learn && setup.learn_spin;
     let (ekf, learned) = run_estimator(cal, base, &balls, &launches);
     let (window, _) =
         run_estimator(cal, EstimatorConfig { spin_source: SpinSource::WindowFit, ..base }, &balls, &launches);
@@ -237,8 +316,9 @@ pub fn evaluate(cal: &Calibration, setup: &StreamSetup) -> StreamReport {
     for lead in LEADS {
         by_lead.extend(rows(lead, at(&|b: &SimBall| b.truth.hit.as_ref().map(|h| h.t - lead))));
     }
+    let timing = timing_by_type(&ekf, &balls, &launches, &reachable);
     let reachable = reachable.iter().filter(|r| **r).count();
-    StreamReport { setup: *setup, balls: balls.len(), reachable, tracked, learned, at_net, by_lead }
+    StreamReport { setup: *setup, balls: balls.len(), reachable, tracked, learned, at_net, by_lead, timing }
 }
 
 /// Lead times of the per-world session table, s before the true hit.
@@ -293,7 +373,8 @@ fn world_session(cal: &Calibration, setup: &StreamSetup) -> WorldSession {
         }
         (out, learned)
     };
-    let (on, learned) = rows(EstimatorConfig { learn: LearnConfig::default(), ..base });
+    let learn = LearnConfig { spin: setup.learn_spin, ..LearnConfig::default() };
+    let (on, learned) = rows(EstimatorConfig { learn, ..base });
     let (off, _) = rows(EstimatorConfig { learn: LearnConfig::OFF, ..base });
     let truth = match setup.world.and_then(|n| world_named(cal, n)) {
         Some(w) => SessionLearned {
@@ -304,6 +385,9 @@ fn world_session(cal: &Calibration, setup: &StreamSetup) -> WorldSession {
             friction: w.physics.friction,
             bounces: 0,
             bounce_vel: [f64::NAN; 3],
+            spin_scale: [f64::NAN; 4],
+            spin_share: [f64::NAN; 4],
+            unexplained: 0,
         },
         None => SessionLearned {
             drag_scale: 1.0,
@@ -311,6 +395,9 @@ fn world_session(cal: &Calibration, setup: &StreamSetup) -> WorldSession {
             friction: cal.physics.friction,
             bounces: 0,
             bounce_vel: [f64::NAN; 3],
+            spin_scale: [f64::NAN; 4],
+            spin_share: [f64::NAN; 4],
+            unexplained: 0,
         },
     };
     WorldSession {
@@ -372,5 +459,27 @@ mod tests {
         let (fast_spin, fast) = at(380.0);
         assert!(slow_spin < 1500.0 && fast_spin < 1500.0, "plans with {slow_spin:.0} and {fast_spin:.0} rad/s");
         assert!(fast <= slow, "at the net: {fast:.1} mm at 380 Hz, {slow:.1} mm at 150 Hz");
+    }
+
+    /// In a world whose lift saturates as real balls' does, the spin the
+    /// session learns from the bounces puts the plans 0.15 s before the
+    /// hit on time far more often: p90 of the hit-time error at least
+    /// halved against the same session without it, and topspin-high no
+    /// longer late by tens of ms at the median.
+    #[test]
+    fn the_spin_learned_at_the_bounce_puts_real_balls_on_time() {
+        let cal = Calibration::default_cell();
+        let setup = |learn_spin| StreamSetup {
+            balls: 90,
+            world: Some("real-launcher"),
+            launcher: true,
+            learn_spin,
+            ..StreamSetup::default()
+        };
+        let p90 = |s: &WorldSession| s.on[2].hit_dt_ms.p90;
+        let (with, without) = (world_session(&cal, &setup(true)), world_session(&cal, &setup(false)));
+        assert!(p90(&with) * 2.0 < p90(&without), "p90 {:.1} ms with, {:.1} without", p90(&with), p90(&without));
+        assert!(with.learned.spin_scale.iter().any(|m| *m > 1.3), "{:?}", with.learned.spin_scale);
+        assert_eq!(without.learned.spin_scale, [1.0; 4]);
     }
 }

@@ -1,0 +1,262 @@
+//! The session's spin prior (issue 30): the spin the table meets per unit
+//! of the spin a flight shows.
+//!
+//! A real ball's lift saturates, so a flight read through the
+//! calibration's lift curve cannot tell a fast spin from a medium one, and
+//! balls differ in their lift by ±25 %. The table can: a topspin ball's
+//! forward kick grows with its spin until the contact slides. Each bounce
+//! that tells (its kick depends on the spin) is kept, in the bin of the
+//! spin parameter its flight showed at the contact; each bin's scale is
+//! the one that best explains the kicks it holds, found on a fixed grid
+//! (×0.5–4) with every bounce's cost capped (a bad ball moves it little).
+//! Where the kicks only bound the scale from below (the contacts slid,
+//! and every larger scale explains them as well), the bin takes the
+//! middle of what fits: a kick cannot exceed the sliding one, so a scale
+//! a little high costs little, and one too low makes the ball early.
+//! Fixed memory ([`BIN_MEMORY`] bounces a bin), bounded work.
+
+use crate::physics::{BallState, BounceModel, Vec3};
+
+/// Bins of the spin scale.
+pub const SPIN_BINS: usize = 4;
+/// The bins' centres in the spin parameter S = r‖ω‖/‖v‖ the flight shows
+/// at the contact; the scale is interpolated linearly between them.
+pub const SPIN_BIN_CENTRES: [f64; SPIN_BINS] = [0.08, 0.2, 0.4, 0.8];
+/// Bounces a bin keeps (the latest).
+pub const BIN_MEMORY: usize = 16;
+/// The grid of scales tried: ×0.5 to ×4 in steps of 2^(1/8).
+const SCALE_GRID: usize = 25;
+/// Most a bounce's normalised squared residual counts.
+const COST_CAP: f64 = 16.0;
+/// σ of ln(scale) about a bin's scale before it holds [`MIN_FOR_SHARE`]
+/// bounces: a flight's spin may be a third off (issue 30's real balls).
+pub const SHARE_START: f64 = 0.3;
+/// Bounces a bin needs before its own spread counts.
+const MIN_FOR_SHARE: usize = 4;
+/// Bounds of a bin's spread.
+const SHARE_BOUNDS: (f64, f64) = (0.05, 0.6);
+/// σ of ln(scale) of the prior that holds each bin at 1 (the
+/// calibration's lift) until its bounces say otherwise.
+const PRIOR_SIGMA: f64 = 0.5;
+/// Least tangential spin at the contact (r‖ω_T‖, m/s) for the bounce to
+/// tell anything about it.
+const MIN_SURFACE_SPEED: f64 = 0.3;
+
+fn grid(k: usize) -> f64 {
+    0.5 * 2f64.powf(k as f64 / 8.0)
+}
+
+/// One bounce a bin keeps: the state at the contact as the flight showed
+/// it, the velocity seen just after it, and that velocity's variance.
+#[derive(Copy, Clone, Debug, PartialEq)]
+struct Seen {
+    before: BallState,
+    after: Vec3,
+    var: Vec3,
+    /// The variance of the flight's own reading of the spin's size, as a
+    /// share of it squared (the filter's, which it already allows for).
+    read_var: f64,
+}
+
+impl Seen {
+    /// Normalised squared residual of the tangential velocity after the
+    /// bounce under `table` with scale `m`.
+    fn cost(&self, table: &BounceModel, m: f64) -> f64 {
+        let v = table.with_spin_scale(m).apply(&self.before).vel;
+        (0..2).map(|k| (v[k] - self.after[k]).powi(2) / self.var[k].max(1e-6)).sum()
+    }
+
+    fn costs(&self, table: &BounceModel) -> [f64; SCALE_GRID] {
+        std::array::from_fn(|k| self.cost(table, grid(k)))
+    }
+}
+
+/// The grid indices whose cost lies within 1 of the least: the scales
+/// the costs cannot tell apart.
+fn fitting(costs: &[f64; SCALE_GRID]) -> (usize, usize) {
+    let best = costs.iter().copied().fold(f64::INFINITY, f64::min);
+    let lo = (0..SCALE_GRID).find(|&k| costs[k] <= best + 1.0).unwrap_or(0);
+    let hi = (0..SCALE_GRID).rev().find(|&k| costs[k] <= best + 1.0).unwrap_or(SCALE_GRID - 1);
+    (lo, hi)
+}
+
+#[derive(Copy, Clone, Debug, PartialEq)]
+struct Bin {
+    seen: [Option<Seen>; BIN_MEMORY],
+    next: usize,
+    scale: f64,
+    /// σ of ln(scale) of one ball about `scale`.
+    share: f64,
+}
+
+/// The spin scale per bin of the flight's spin parameter.
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub struct SpinPrior {
+    bins: [Bin; SPIN_BINS],
+    /// Bounces taken in (that told something about the spin).
+    pub count: u32,
+}
+
+impl Default for SpinPrior {
+    fn default() -> Self {
+        let bin = Bin { seen: [None; BIN_MEMORY], next: 0, scale: 1.0, share: SHARE_START };
+        SpinPrior { bins: [bin; SPIN_BINS], count: 0 }
+    }
+}
+
+impl SpinPrior {
+    /// Each bin's scale.
+    pub fn scales(&self) -> [f64; SPIN_BINS] {
+        self.bins.map(|b| b.scale)
+    }
+
+    /// Each bin's spread: σ of ln(scale) of one ball about the bin's.
+    pub fn shares(&self) -> [f64; SPIN_BINS] {
+        self.bins.map(|b| b.share)
+    }
+
+    /// The scale for a flight showing spin parameter `s`: linear between
+    /// the bins' centres, the end bins' values beyond them.
+    pub fn scale_at(&self, s: f64) -> f64 {
+        self.interpolate(s, |b| b.scale)
+    }
+
+    /// How far one ball's scale strays from [`Self::scale_at`], as σ of
+    /// its logarithm (the filter's [`super::ekf::EkfNoise::bounce_spin_share`]).
+    pub fn share_at(&self, s: f64) -> f64 {
+        self.interpolate(s, |b| b.share)
+    }
+
+    fn interpolate(&self, s: f64, of: impl Fn(&Bin) -> f64) -> f64 {
+        let c = &SPIN_BIN_CENTRES;
+        let v = |k: usize| of(&self.bins[k]);
+        if !(s > c[0]) {
+            return v(0);
+        }
+        for k in 1..SPIN_BINS {
+            if s <= c[k] {
+                let f = (s - c[k - 1]) / (c[k] - c[k - 1]);
+                return v(k - 1) + f * (v(k) - v(k - 1));
+            }
+        }
+        v(SPIN_BINS - 1)
+    }
+
+    /// Takes one bounce: `before` the state at the contact as the flight
+    /// showed it, `after` the velocity seen just after it with per-axis
+    /// variance `var` (of the reading and of what the table leaves
+    /// unexplained), `table` the session's table. Kept in the bin nearest
+    /// to the flight's spin parameter where the kick depends on the spin
+    /// (true), and that bin's scale found anew. `read_var`: the variance
+    /// of the flight's reading of the spin's size as a share of it squared.
+    pub fn take(&mut self, before: &BallState, after: &Vec3, var: &Vec3, read_var: f64, table: &BounceModel) -> bool {
+        let seen = Seen { before: *before, after: *after, var: *var, read_var };
+        let table = table.with_spin_scale(1.0);
+        if table.radius * before.spin.x.hypot(before.spin.y) < MIN_SURFACE_SPEED {
+            return false;
+        }
+        // Every scale down to the grid's least fits: the kick does not
+        // depend on the spin (a backspin ball slides whatever it has).
+        if fitting(&seen.costs(&table)).0 == 0 {
+            return false;
+        }
+        let s = table.radius * before.spin.norm() / before.vel.norm().max(1e-9);
+        let c = &SPIN_BIN_CENTRES;
+        let k = (0..SPIN_BINS).min_by(|&a, &b| (c[a] - s).abs().total_cmp(&(c[b] - s).abs())).expect("bins");
+        let bin = &mut self.bins[k];
+        bin.seen[bin.next] = Some(seen);
+        bin.next = (bin.next + 1) % BIN_MEMORY;
+        let mut total: [f64; SCALE_GRID] = std::array::from_fn(|k| (grid(k).ln() / PRIOR_SIGMA).powi(2));
+        for seen in bin.seen.iter().flatten() {
+            for (t, c) in total.iter_mut().zip(seen.costs(&table)) {
+                *t += c.min(COST_CAP);
+            }
+        }
+        let (lo, hi) = fitting(&total);
+        bin.scale = (grid(lo) * grid(hi)).sqrt();
+        // Each ball's own scale (where only bounded below, no less than
+        // its bound) about the bin's.
+        // less what the flight's own reading of each explains.
+        let (mut sum, mut n) = (0.0, 0usize);
+        for seen in bin.seen.iter().flatten() {
+            let (lo, hi) = fitting(&seen.costs(&table));
+            let own = if hi == SCALE_GRID - 1 { grid(lo).max(bin.scale) } else { (grid(lo) * grid(hi)).sqrt() };
+            sum += (own / bin.scale).ln().powi(2) - seen.read_var.max(0.0);
+            n += 1;
+        }
+        if n >= MIN_FOR_SHARE {
+            bin.share = (sum / n as f64).max(0.0).sqrt().clamp(SHARE_BOUNDS.0, SHARE_BOUNDS.1);
+        }
+        self.count = self.count.saturating_add(1);
+        true
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const R: f64 = 0.02;
+
+    fn shown(w: f64) -> BallState {
+        BallState::new(Vec3::zeros(), Vec3::new(5.0, 0.0, -3.0), Vec3::new(0.0, w, 0.0))
+    }
+
+    /// Topspin balls whose flights showed half their spin (they roll off
+    /// the table): the bin learns ×2; a backspin ball teaches nothing (it
+    /// slides whatever its spin); the other bins stay at 1.
+    #[test]
+    fn the_bounce_reads_the_spin_the_flight_could_not() {
+        let table = BounceModel::new(0.92, 0.2, R);
+        let var = Vec3::repeat(0.03f64.powi(2));
+        let mut prior = SpinPrior::default();
+        for k in 0..20 {
+            let truth = 200.0 + k as f64;
+            assert!(prior.take(&shown(0.5 * truth), &table.apply(&shown(truth)).vel, &var, 0.0, &table));
+        }
+        // S shown: 0.02·105/5.83 = 0.36, the bin at 0.4.
+        let s = prior.scales();
+        assert!((s[2] - 2.0).abs() < 0.1, "{s:?}");
+        // Balls alike: their spread is the least; the others' the start.
+        let shares = prior.shares();
+        assert!(shares[2] < 0.1 && [shares[0], shares[1], shares[3]] == [SHARE_START; 3], "{shares:?}");
+        assert_eq!((s[0], s[1], s[3]), (1.0, 1.0, 1.0));
+        assert!(!prior.take(&shown(-150.0), &table.apply(&shown(-300.0)).vel, &var, 0.0, &table));
+        assert_eq!(prior.count, 20);
+        assert!((prior.scale_at(0.3) - (1.0 + 0.5 * (s[2] - 1.0))).abs() < 1e-9);
+        assert_eq!(prior.scale_at(5.0), 1.0);
+    }
+
+    /// Fast topspin that slides at the contact, shown at a third of its
+    /// spin: the kick only bounds the scale from below; the bin's scale
+    /// lies past that bound, and its kick is the ball's.
+    #[test]
+    fn a_sliding_contact_bounds_the_scale_from_below() {
+        let table = BounceModel::new(0.92, 0.2, R);
+        let var = Vec3::repeat(0.03f64.powi(2));
+        let mut prior = SpinPrior::default();
+        let after = table.apply(&shown(600.0)).vel;
+        for _ in 0..8 {
+            prior.take(&shown(200.0), &after, &var, 0.0, &table);
+        }
+        let m = prior.scale_at(0.02 * 200.0 / 34f64.sqrt());
+        let kick = table.with_spin_scale(m).apply(&shown(200.0)).vel.x;
+        assert!((kick - after.x).abs() < 0.02 && m <= 4.0, "×{m}: {kick} vs {}", after.x);
+    }
+
+    /// One wild bounce among many good ones moves the bin's scale little.
+    #[test]
+    fn a_bad_bounce_moves_the_scale_little() {
+        let table = BounceModel::new(0.92, 0.2, R);
+        let var = Vec3::repeat(0.03f64.powi(2));
+        let mut prior = SpinPrior::default();
+        for k in 0..12 {
+            let truth = 200.0 + k as f64;
+            prior.take(&shown(0.5 * truth), &table.apply(&shown(truth)).vel, &var, 0.0, &table);
+        }
+        let good = prior.scales()[2];
+        let wild = table.apply(&shown(200.0)).vel + Vec3::new(-1.5, 0.8, 0.0);
+        prior.take(&shown(100.0), &wild, &var, 0.0, &table);
+        assert!((prior.scales()[2] - good).abs() < 0.1 * good, "{good} → {:?}", prior.scales());
+    }
+}
