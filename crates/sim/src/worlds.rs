@@ -86,6 +86,12 @@ pub fn worlds(cal: &Calibration) -> Vec<World> {
         axis: SpinAxis::Skewed { max_deg: SKEW_DEG },
     };
     let sawicki = LiftModel::Saturating { c_m: 1.0, s_half: 0.5 };
+    // A lift measured on real balls, each ball with its own drag and lift.
+    let measured = |name, about, curve, e, mu| World {
+        ball_drag: REAL_BALL_DRAG,
+        ball_lift: REAL_BALL_LIFT,
+        ..world(name, about, measured_lift(curve), 0.475, e, mu)
+    };
     vec![
         world(
             "linear-weak",
@@ -131,32 +137,22 @@ pub fn worlds(cal: &Calibration) -> Vec<World> {
                 0.20,
             )
         },
-        World {
-            ball_drag: REAL_BALL_DRAG,
-            ball_lift: REAL_BALL_LIFT,
-            ..world(
-                "real-launcher",
-                "C_L measured on 166 launcher flights (saturates above S 0.5), each ball's C_D 0.40–0.55 and lift \
-                 ×0.75–1.30, e 0.92, μ 0.20",
-                measured_lift(REAL_LAUNCHER_LIFT),
-                0.475,
-                0.92,
-                0.20,
-            )
-        },
-        World {
-            ball_drag: REAL_BALL_DRAG,
-            ball_lift: REAL_BALL_LIFT,
-            ..world(
-                "real-rally",
-                "C_L of 610 elite strokes' bounce times (saturates above S 0.5), each ball's C_D 0.40–0.55 and \
-                 lift ×0.75–1.30, e 0.90, μ 0.25",
-                measured_lift(REAL_RALLY_LIFT),
-                0.475,
-                0.90,
-                0.25,
-            )
-        },
+        measured(
+            "real-launcher",
+            "C_L measured on 166 launcher flights (saturates above S 0.5), each ball's C_D 0.40–0.55 and lift \
+             ×0.75–1.30, e 0.92, μ 0.20",
+            REAL_LAUNCHER_LIFT,
+            0.92,
+            0.20,
+        ),
+        measured(
+            "real-rally",
+            "C_L of 610 elite strokes' bounce times (saturates above S 0.5), each ball's C_D 0.40–0.55 and lift \
+             ×0.75–1.30, e 0.90, μ 0.25",
+            REAL_RALLY_LIFT,
+            0.90,
+            0.25,
+        ),
     ]
 }
 
