@@ -25,8 +25,6 @@ const TAIL: &[u8] = b"</IPOC></Sen>";
 const MAX_DIGITS: usize = 20;
 /// Room for the longest answer.
 pub const ANSWER_CAP: usize = HEAD.len() + MAX_DIGITS + TAIL.len();
-/// How often a blocking wait looks at the stop flag.
-const STOP_POLL: std::time::Duration = std::time::Duration::from_millis(20);
 
 /// The digits between `<IPOC>` and `</IPOC>`, if any.
 pub fn ipoc_digits(request: &[u8]) -> Option<&[u8]> {
@@ -63,11 +61,7 @@ pub struct FloorServer {
 impl FloorServer {
     /// Binds `addr` with the RSI server's socket options for `wait`.
     pub fn bind(addr: SocketAddr, wait: WaitStrategy) -> io::Result<Self> {
-        let socket = UdpSocket::bind(addr)?;
-        match wait {
-            WaitStrategy::Blocking => socket.set_read_timeout(Some(STOP_POLL))?,
-            WaitStrategy::BusyPoll => socket.set_nonblocking(true)?,
-        }
+        let socket = wait.bind(addr)?;
         let answer_ns = Histogram::new_with_bounds(1, 60_000_000_000, 3).map_err(io::Error::other)?;
         Ok(FloorServer { socket, wait, rx: [0; MAX_REQUEST_LEN + 1], tx: [0; ANSWER_CAP], answer_ns, unanswerable: 0 })
     }
@@ -79,16 +73,7 @@ impl FloorServer {
     /// Answers until `stop`.
     pub fn run(&mut self, stop: &AtomicBool) -> io::Result<()> {
         while !stop.load(Ordering::Relaxed) {
-            let (n, from) = match self.socket.recv_from(&mut self.rx) {
-                Ok(x) => x,
-                Err(e) if e.kind() == io::ErrorKind::WouldBlock || e.kind() == io::ErrorKind::TimedOut => {
-                    if self.wait == WaitStrategy::BusyPoll {
-                        std::hint::spin_loop();
-                    }
-                    continue;
-                }
-                Err(e) => return Err(e),
-            };
+            let Some((n, from)) = self.wait.receive(&self.socket, &mut self.rx)? else { continue };
             let now = clock::now();
             let Some(digits) = ipoc_digits(&self.rx[..n.min(MAX_REQUEST_LEN)]) else {
                 self.unanswerable += 1;

@@ -28,6 +28,34 @@ pub enum WaitStrategy {
     BusyPoll,
 }
 
+impl WaitStrategy {
+    /// A UDP socket bound to `addr` that waits this way: a blocking
+    /// receive that returns every [`STOP_POLL`], or a non-blocking one.
+    pub(crate) fn bind(self, addr: SocketAddr) -> io::Result<UdpSocket> {
+        let socket = UdpSocket::bind(addr)?;
+        match self {
+            WaitStrategy::Blocking => socket.set_read_timeout(Some(STOP_POLL))?,
+            WaitStrategy::BusyPoll => socket.set_nonblocking(true)?,
+        }
+        Ok(socket)
+    }
+
+    /// The next datagram on `socket` into `buf`, or `None` where none came
+    /// (the blocking wait timed out, or a busy poll found nothing).
+    pub(crate) fn receive(self, socket: &UdpSocket, buf: &mut [u8]) -> io::Result<Option<(usize, SocketAddr)>> {
+        match socket.recv_from(buf) {
+            Ok(x) => Ok(Some(x)),
+            Err(e) if e.kind() == io::ErrorKind::WouldBlock || e.kind() == io::ErrorKind::TimedOut => {
+                if self == WaitStrategy::BusyPoll {
+                    std::hint::spin_loop();
+                }
+                Ok(None)
+            }
+            Err(e) => Err(e),
+        }
+    }
+}
+
 /// The writing end of the latest-value plan slot (the estimator thread).
 #[derive(Debug)]
 pub struct PlanWriter(triple_buffer::Input<Option<StrikePlan>>);
@@ -96,13 +124,8 @@ pub struct RsiServer {
 impl RsiServer {
     /// Binds `addr` (the IP/PORT of the Ethernet configuration).
     pub fn bind(addr: SocketAddr, session: RsiSession, wait: WaitStrategy) -> io::Result<Self> {
-        let socket = UdpSocket::bind(addr)?;
-        match wait {
-            WaitStrategy::Blocking => socket.set_read_timeout(Some(STOP_POLL))?,
-            WaitStrategy::BusyPoll => socket.set_nonblocking(true)?,
-        }
         Ok(RsiServer {
-            socket,
+            socket: wait.bind(addr)?,
             session,
             wait,
             allowed: None,
@@ -144,19 +167,12 @@ impl RsiServer {
     /// Runs until `stop`; hands every session event to `on_event`.
     pub fn run(&mut self, stop: &AtomicBool, plans: &mut PlanReader, mut sink: impl RsiSink) -> io::Result<()> {
         while !stop.load(Ordering::Relaxed) {
-            let (n, from) = match self.socket.recv_from(&mut self.rx) {
-                Ok(x) => x,
-                Err(e) if e.kind() == io::ErrorKind::WouldBlock || e.kind() == io::ErrorKind::TimedOut => {
-                    if self.wait == WaitStrategy::BusyPoll {
-                        std::hint::spin_loop();
-                    }
-                    self.session.handle_timeout(clock::now());
-                    while let Some(e) = self.session.poll_event() {
-                        sink.event(e);
-                    }
-                    continue;
+            let Some((n, from)) = self.wait.receive(&self.socket, &mut self.rx)? else {
+                self.session.handle_timeout(clock::now());
+                while let Some(e) = self.session.poll_event() {
+                    sink.event(e);
                 }
-                Err(e) => return Err(e),
+                continue;
             };
             let now = clock::now();
             if self.allowed.is_some_and(|ip| ip != from.ip()) {
