@@ -375,7 +375,7 @@ impl Estimator {
             // Against the session's own table: what it needs to explain the kick.
             let var = Vec3::repeat(after_var) + self.session.bounce_noise() + explained;
             let plain = self.session.bounce_model(&self.prop.bounce);
-            let s_shown = session::spin_parameter(&before, table.radius);
+            let s_shown = spin_prior::spin_parameter(&before, table.radius);
             let scale = self.session.spin.scale_at(s_shown);
             if !(session::bounce_explained(&before, &after, &var, &table)
                 || session::bounce_explained(&before, &after, &var, &plain.with_spin_scale(scale)))
@@ -515,7 +515,7 @@ impl Estimator {
         ekf.p.fixed_view_mut::<3, 3>(6, 6).copy_from(&spin_cov);
         let mut prop = self.session_propagator();
         if self.cfg.learn.enabled && self.cfg.learn.spin {
-            let s = session::spin_parameter(&ekf.state(), prop.bounce.radius);
+            let s = spin_prior::spin_parameter(&ekf.state(), prop.bounce.radius);
             prop.bounce = prop.bounce.with_spin_scale(self.session.spin.scale_at(s));
             ekf.noise.bounce_spin_share = self.session.spin.share_at(s);
         }
@@ -556,7 +556,7 @@ impl Estimator {
         }
         if track.spin_before_bounce.is_none() && cfg.learn.enabled && cfg.learn.spin {
             // The spin the table will meet, for the flight shown so far.
-            let s = session::spin_parameter(&track.ekf.state(), self.prop.bounce.radius);
+            let s = spin_prior::spin_parameter(&track.ekf.state(), self.prop.bounce.radius);
             track.prop.bounce = track.prop.bounce.with_spin_scale(self.session.spin.scale_at(s));
             track.ekf.noise.bounce_spin_share = self.session.spin.share_at(s);
         }

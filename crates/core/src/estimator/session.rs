@@ -46,7 +46,7 @@ pub struct LearnConfig {
     /// before its bounce (and at the bounce).
     pub ball_drag_every: usize,
     /// Learn the spin the table meets per unit of the spin a flight shows
-    /// ([`Session::spin_scale`]), and bounce the next balls with it.
+    /// ([`Session::spin`]), and bounce the next balls with it.
     pub spin: bool,
 }
 
@@ -172,7 +172,7 @@ impl Session {
     }
 
     /// The table as learned so far (spin scale 1: a ball's own comes
-    /// with its flight, [`Self::spin_scale_at`]).
+    /// with its flight, [`SpinPrior::scale_at`]).
     pub fn bounce_model(&self, calibrated: &BounceModel) -> BounceModel {
         BounceModel::new(self.restitution.value, self.friction.value, calibrated.radius)
     }
@@ -217,11 +217,6 @@ pub(crate) fn drag_from_flight(samples: &[Sample], flight: &FlightModel, min_sam
         xx += x * x;
     }
     (xx > 0.0).then(|| xy / xx).filter(|s| s.is_finite() && *s > 0.0)
-}
-
-/// The spin parameter S = r‖ω‖/‖v‖ of a state.
-pub(crate) fn spin_parameter(state: &BallState, radius: f64) -> f64 {
-    radius * state.spin.norm() / state.vel.norm().max(1e-9)
 }
 
 /// Whether `table` explains a bounce: the squared Mahalanobis distance

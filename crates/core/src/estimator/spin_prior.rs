@@ -42,6 +42,11 @@ const PRIOR_SIGMA: f64 = 0.5;
 /// tell anything about it.
 const MIN_SURFACE_SPEED: f64 = 0.3;
 
+/// The spin parameter S = r‖ω‖/‖v‖ of a state.
+pub(crate) fn spin_parameter(state: &BallState, radius: f64) -> f64 {
+    radius * state.spin.norm() / state.vel.norm().max(1e-9)
+}
+
 fn grid(k: usize) -> f64 {
     0.5 * 2f64.powf(k as f64 / 8.0)
 }
@@ -130,7 +135,7 @@ impl SpinPrior {
     fn interpolate(&self, s: f64, of: impl Fn(&Bin) -> f64) -> f64 {
         let c = &SPIN_BIN_CENTRES;
         let v = |k: usize| of(&self.bins[k]);
-        if !(s > c[0]) {
+        if s.is_nan() || s <= c[0] {
             return v(0);
         }
         for k in 1..SPIN_BINS {
@@ -160,26 +165,29 @@ impl SpinPrior {
         if fitting(&seen.costs(&table)).0 == 0 {
             return false;
         }
-        let s = table.radius * before.spin.norm() / before.vel.norm().max(1e-9);
+        let s = spin_parameter(before, table.radius);
         let c = &SPIN_BIN_CENTRES;
         let k = (0..SPIN_BINS).min_by(|&a, &b| (c[a] - s).abs().total_cmp(&(c[b] - s).abs())).expect("bins");
         let bin = &mut self.bins[k];
         bin.seen[bin.next] = Some(seen);
         bin.next = (bin.next + 1) % BIN_MEMORY;
+        // Each kept bounce's costs, once.
+        let costs: [Option<[f64; SCALE_GRID]>; BIN_MEMORY] = bin.seen.map(|seen| seen.map(|s| s.costs(&table)));
         let mut total: [f64; SCALE_GRID] = std::array::from_fn(|k| (grid(k).ln() / PRIOR_SIGMA).powi(2));
-        for seen in bin.seen.iter().flatten() {
-            for (t, c) in total.iter_mut().zip(seen.costs(&table)) {
+        for c in costs.iter().flatten() {
+            for (t, c) in total.iter_mut().zip(c) {
                 *t += c.min(COST_CAP);
             }
         }
         let (lo, hi) = fitting(&total);
         bin.scale = (grid(lo) * grid(hi)).sqrt();
         // Each ball's own scale (where only bounded below, no less than
-        // its bound) about the bin's.
-        // less what the flight's own reading of each explains.
+        // its bound) about the bin's, less what the flight's own reading
+        // of each explains.
         let (mut sum, mut n) = (0.0, 0usize);
-        for seen in bin.seen.iter().flatten() {
-            let (lo, hi) = fitting(&seen.costs(&table));
+        for (c, seen) in costs.iter().zip(&bin.seen) {
+            let (Some(c), Some(seen)) = (c, seen) else { continue };
+            let (lo, hi) = fitting(c);
             let own = if hi == SCALE_GRID - 1 { grid(lo).max(bin.scale) } else { (grid(lo) * grid(hi)).sqrt() };
             sum += (own / bin.scale).ln().powi(2) - seen.read_var.max(0.0);
             n += 1;
