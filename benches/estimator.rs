@@ -88,6 +88,11 @@ fn benches(c: &mut Criterion) {
     paper.strike.aim = topspin_core::calib::AimMode::Paper;
     percentiles(&obs, &paper, cfg, "[aim paper]");
     percentiles(&obs, &cal, EstimatorConfig { smooth: false, ..cfg }, "[aim landing, no batch]");
+    // The spin prior's cost (its bounce search once per ball, its scale
+    // every sample before the bounce), side by side in the same run.
+    let mut no_spin = cfg;
+    no_spin.learn.spin = false;
+    percentiles(&obs, &cal, no_spin, "[aim landing, no spin learning]");
     c.bench_function("estimator/observe_stream_of_45_balls", |b| {
         b.iter(|| {
             let mut est = Estimator::new(&cal, EstimatorConfig::default());
