@@ -90,17 +90,20 @@ pub struct Ekf {
     pub p: M9,
     /// Process and measurement noise.
     pub noise: EkfNoise,
-    /// Bounces passed since initialisation.
+    /// Bounces on the robot's half (x > 0) passed since initialisation.
     pub bounces: u32,
+    /// Bounces on the opponent's half passed (a serve's on its own half).
+    pub own_half_bounces: u32,
     /// The state at the latest bounce's contact, just before the impact.
     pub last_contact: Option<BallState>,
     /// The variance of each velocity component just after that impact
     /// from the state's uncertainty before it (through the bounce's
     /// Jacobian), before [`EkfNoise::bounce_vel`] is added.
     pub contact_vel_var: Vec3,
-    /// The variance of the spin's size at that contact, as a share of
-    /// it squared (before [`EkfNoise::bounce_spin_share`] is added).
-    pub contact_spin_share_var: f64,
+    /// The same from the flight's own reading alone (before
+    /// [`EkfNoise::bounce_spin_share`] is added): what the spin prior
+    /// weighs one kick with.
+    pub contact_vel_var_read: Vec3,
 }
 
 fn state_of(x: &V9) -> BallState {
@@ -126,9 +129,10 @@ impl Ekf {
             p,
             noise,
             bounces: 0,
+            own_half_bounces: 0,
             last_contact: None,
             contact_vel_var: Vec3::zeros(),
-            contact_spin_share_var: 0.0,
+            contact_vel_var_read: Vec3::zeros(),
         }
     }
 
@@ -212,7 +216,8 @@ impl Ekf {
     }
 
     /// Predicts to time `t` (≥ the filter's time), through a bounce if one
-    /// happens on the way. Returns the bounce time if there was one.
+    /// happens on the way. Returns the bounce time if there was one on the
+    /// robot's half (a serve's bounce on its own half is counted apart).
     pub fn predict(&mut self, prop: &Propagator, t: f64) -> Option<f64> {
         let mut bounced = None;
         let mut guard = 0;
@@ -237,11 +242,10 @@ impl Ekf {
             match event {
                 Event::Bounce { t: tb, before } => {
                     let w = before.spin;
-                    self.contact_spin_share_var = if w.norm() > 1e-9 {
-                        (w.transpose() * self.p.fixed_view::<3, 3>(6, 6) * w)[0] / w.norm_squared().powi(2)
-                    } else {
-                        0.0
-                    };
+                    let j = Self::bounce_jacobian(prop, &before);
+                    let vel_var = |p: &M9| Vec3::new(p[(3, 3)], p[(4, 4)], p[(5, 5)]);
+                    let read = j * self.p * j.transpose();
+                    self.contact_vel_var_read = vel_var(&read);
                     // A spin whose size is uncertain by the share beyond
                     // the filter's own reading: its kick moves the
                     // velocity after the contact, and the first samples
@@ -250,17 +254,22 @@ impl Ekf {
                     if share > 0.0 {
                         let mut spin_cov = self.p.fixed_view_mut::<3, 3>(6, 6);
                         spin_cov += w * w.transpose() * (share * share);
+                        self.p = j * self.p * j.transpose();
+                    } else {
+                        self.p = read;
                     }
-                    let j = Self::bounce_jacobian(prop, &before);
-                    self.p = j * self.p * j.transpose();
-                    self.contact_vel_var = Vec3::new(self.p[(3, 3)], self.p[(4, 4)], self.p[(5, 5)]);
+                    self.contact_vel_var = vel_var(&self.p);
                     for k in 3..6 {
                         self.p[(k, k)] += self.noise.bounce_vel[k - 3];
                         self.p[(k + 3, k + 3)] += self.noise.bounce_spin;
                     }
-                    self.bounces += 1;
                     self.last_contact = Some(before);
-                    bounced = Some(tb);
+                    if before.pos.x > 0.0 {
+                        self.bounces += 1;
+                        bounced = Some(tb);
+                    } else {
+                        self.own_half_bounces += 1;
+                    }
                 }
                 Event::TimeLimit { .. } => break,
                 // Net, floor: the state stops there; the caller ends the track.

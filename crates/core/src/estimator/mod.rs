@@ -373,7 +373,7 @@ impl Estimator {
             let residual = after - table.apply(&before).vel;
             let explained = track.ekf.contact_vel_var + Vec3::repeat(after_var);
             // Against the session's own table: what it needs to explain the kick.
-            let var = Vec3::repeat(after_var) + self.session.bounce_noise() + explained;
+            let var = self.session.bounce_noise() + explained;
             let plain = self.session.bounce_model(&self.prop.bounce);
             let s_shown = spin_prior::spin_parameter(&before, table.radius);
             let scale = self.session.spin.scale_at(s_shown);
@@ -386,7 +386,8 @@ impl Estimator {
             }
             self.session.take_bounce_residual(&residual, &explained, &cfg);
             if cfg.spin {
-                self.session.spin.take(&before, &after, &var, track.ekf.contact_spin_share_var, &plain);
+                let read = track.ekf.contact_vel_var_read + Vec3::repeat(after_var);
+                self.session.spin.take(&before, &after, &read, &plain);
             }
             // The table, from the spin it met.
             let met = crate::physics::BallState { spin: before.spin * self.session.spin.scale_at(s_shown), ..before };
@@ -589,6 +590,14 @@ impl Estimator {
         }
         match trial.update(&sample.pos) {
             Update::Accepted { .. } => {
+                if trial.own_half_bounces > track.ekf.own_half_bounces {
+                    // A serve's bounce on its own half: the flight the spin
+                    // is read from starts again after it.
+                    track.window.clear();
+                    track.batch = None;
+                    track.batch_from = 0;
+                    track.smoothed = false;
+                }
                 track.ekf = trial;
                 track.last_t = sample.t;
                 track.rejects.clear();

@@ -58,9 +58,6 @@ struct Seen {
     before: BallState,
     after: Vec3,
     var: Vec3,
-    /// The variance of the flight's own reading of the spin's size, as a
-    /// share of it squared (the filter's, which it already allows for).
-    read_var: f64,
 }
 
 impl Seen {
@@ -152,10 +149,11 @@ impl SpinPrior {
     /// variance `var` (of the reading and of what the table leaves
     /// unexplained), `table` the session's table. Kept in the bin nearest
     /// to the flight's spin parameter where the kick depends on the spin
-    /// (true), and that bin's scale found anew. `read_var`: the variance
-    /// of the flight's reading of the spin's size as a share of it squared.
-    pub fn take(&mut self, before: &BallState, after: &Vec3, var: &Vec3, read_var: f64, table: &BounceModel) -> bool {
-        let seen = Seen { before: *before, after: *after, var: *var, read_var };
+    /// (true), and that bin's scale found anew. `var` holds the flight's
+    /// own uncertainty through the contact (not the bin's spread), so that
+    /// what fits one kick is what the reading and the tracker leave open.
+    pub fn take(&mut self, before: &BallState, after: &Vec3, var: &Vec3, table: &BounceModel) -> bool {
+        let seen = Seen { before: *before, after: *after, var: *var };
         let table = table.with_spin_scale(1.0);
         if table.radius * before.spin.x.hypot(before.spin.y) < MIN_SURFACE_SPEED {
             return false;
@@ -182,14 +180,18 @@ impl SpinPrior {
         let (lo, hi) = fitting(&total);
         bin.scale = (grid(lo) * grid(hi)).sqrt();
         // Each ball's own scale (where only bounded below, no less than
-        // its bound) about the bin's, less what the flight's own reading
-        // of each explains.
+        // its bound) about the bin's, less what its kick leaves open (the
+        // half-width of what fits it, ±1σ: the flight's reading and the
+        // tracker's noise, not the ball).
         let (mut sum, mut n) = (0.0, 0usize);
-        for (c, seen) in costs.iter().zip(&bin.seen) {
-            let (Some(c), Some(seen)) = (c, seen) else { continue };
+        for c in costs.iter().flatten() {
             let (lo, hi) = fitting(c);
-            let own = if hi == SCALE_GRID - 1 { grid(lo).max(bin.scale) } else { (grid(lo) * grid(hi)).sqrt() };
-            sum += (own / bin.scale).ln().powi(2) - seen.read_var.max(0.0);
+            let (own, open) = if hi == SCALE_GRID - 1 {
+                (grid(lo).max(bin.scale), 0.0)
+            } else {
+                ((grid(lo) * grid(hi)).sqrt(), 0.5 * (grid(hi) / grid(lo)).ln())
+            };
+            sum += (own / bin.scale).ln().powi(2) - open * open;
             n += 1;
         }
         if n >= MIN_FOR_SHARE {
@@ -220,7 +222,7 @@ mod tests {
         let mut prior = SpinPrior::default();
         for k in 0..20 {
             let truth = 200.0 + k as f64;
-            assert!(prior.take(&shown(0.5 * truth), &table.apply(&shown(truth)).vel, &var, 0.0, &table));
+            assert!(prior.take(&shown(0.5 * truth), &table.apply(&shown(truth)).vel, &var, &table));
         }
         // S shown: 0.02·105/5.83 = 0.36, the bin at 0.4.
         let s = prior.scales();
@@ -229,7 +231,7 @@ mod tests {
         let shares = prior.shares();
         assert!(shares[2] < 0.1 && [shares[0], shares[1], shares[3]] == [SHARE_START; 3], "{shares:?}");
         assert_eq!((s[0], s[1], s[3]), (1.0, 1.0, 1.0));
-        assert!(!prior.take(&shown(-150.0), &table.apply(&shown(-300.0)).vel, &var, 0.0, &table));
+        assert!(!prior.take(&shown(-150.0), &table.apply(&shown(-300.0)).vel, &var, &table));
         assert_eq!(prior.count, 20);
         assert!((prior.scale_at(0.3) - (1.0 + 0.5 * (s[2] - 1.0))).abs() < 1e-9);
         assert_eq!(prior.scale_at(5.0), 1.0);
@@ -245,7 +247,7 @@ mod tests {
         let mut prior = SpinPrior::default();
         let after = table.apply(&shown(600.0)).vel;
         for _ in 0..8 {
-            prior.take(&shown(200.0), &after, &var, 0.0, &table);
+            prior.take(&shown(200.0), &after, &var, &table);
         }
         // S shown 0.69: kept in the bin at 0.8.
         let m = prior.scales()[3];
@@ -261,11 +263,11 @@ mod tests {
         let mut prior = SpinPrior::default();
         for k in 0..12 {
             let truth = 200.0 + k as f64;
-            prior.take(&shown(0.5 * truth), &table.apply(&shown(truth)).vel, &var, 0.0, &table);
+            prior.take(&shown(0.5 * truth), &table.apply(&shown(truth)).vel, &var, &table);
         }
         let good = prior.scales()[2];
         let wild = table.apply(&shown(200.0)).vel + Vec3::new(-1.5, 0.8, 0.0);
-        prior.take(&shown(100.0), &wild, &var, 0.0, &table);
+        prior.take(&shown(100.0), &wild, &var, &table);
         assert!((prior.scales()[2] - good).abs() < 0.1 * good, "{good} → {:?}", prior.scales());
     }
 }

@@ -57,7 +57,8 @@ pub enum FlightEnd {
 /// Next contact (if the ball is still to bounce) and the hitting point.
 #[derive(Copy, Clone, Debug, PartialEq)]
 pub struct Prediction {
-    /// The next table contact, if the ball bounces before the prediction ends.
+    /// The next table contact on the robot's half, if the ball bounces
+    /// there before the prediction ends.
     pub bounce: Option<Contact>,
     /// The crossing of the hitting plane, if the flight reaches it.
     pub hit: Option<HitPoint>,
@@ -65,9 +66,10 @@ pub struct Prediction {
     pub end: FlightEnd,
 }
 
-/// Predicts from `state` at time `t`: the next table contact and the
-/// crossing of the plane x = `hit_plane_x` towards +x (after at most one
-/// bounce).
+/// Predicts from `state` at time `t`: the next table contact on the
+/// robot's half and the crossing of the plane x = `hit_plane_x` towards +x
+/// (after at most one bounce there; a serve's bounce on its own half
+/// before it is flown through).
 pub fn predict(prop: &Propagator, state: &BallState, t: f64, hit_plane_x: f64) -> Prediction {
     let stop = StopAt { t_max: t + PREDICTION_HORIZON, hit_plane_x: Some(hit_plane_x), net: true };
     let prop = &Propagator { dt: prop.dt.max(PREDICT_STEP), ..*prop };
@@ -75,6 +77,8 @@ pub fn predict(prop: &Propagator, state: &BallState, t: f64, hit_plane_x: f64) -
     let mut bounce = None;
     let end = loop {
         match prop.advance(&mut s, &mut now, &stop) {
+            // A serve's bounce on its own half: not a contact the robot plays.
+            Event::Bounce { before, .. } if before.pos.x <= 0.0 && bounce.is_none() => {}
             Event::Bounce { t, before } => {
                 if bounce.is_some() {
                     break FlightEnd::SecondBounce;
@@ -116,6 +120,7 @@ mod tests {
                 let stop = StopAt { t_max: PREDICTION_HORIZON, hit_plane_x: Some(x), net: true };
                 let reference = loop {
                     match fine.advance(&mut r, &mut t, &stop) {
+                        Event::Bounce { before, .. } if before.pos.x <= 0.0 && bounces == 0 => {}
                         Event::Bounce { .. } if bounces == 0 => bounces += 1,
                         Event::HitPlane { t } => break Some((t, r.pos)),
                         _ => break None,
