@@ -72,6 +72,16 @@ pub struct DemoArgs {
     /// at the commissioning speed first, or holds where that is unsafe.
     #[arg(long, value_name = "A1,..,A6", value_parser = super::mock_krc::parse_six, allow_hyphen_values = true)]
     pub start_joints: Option<[f64; 6]>,
+    /// Fly the balls in a world of `topspin eval worlds` (e.g. the lift
+    /// measured on real balls: real-launcher, real-rally), from the cell's
+    /// wheel launcher; the daemon knows only the calibration.
+    #[arg(long, value_name = "NAME")]
+    pub world: Option<String>,
+    /// Where the balls come from: `launcher` (the nine settings), or real
+    /// human strokes measured right after the racket: `human-rally`,
+    /// `human-serve`, `human` (both).
+    #[arg(long, default_value_t = topspin_sim::Strokes::Launcher, value_name = "SOURCE")]
+    pub strokes: topspin_sim::Strokes,
 }
 
 pub fn run(a: DemoArgs) -> anyhow::Result<()> {
@@ -88,6 +98,14 @@ pub fn run(a: DemoArgs) -> anyhow::Result<()> {
         return Err(BadInput(format!("--gap {} must be positive", a.gap)).into());
     }
     let cal = Calibration::default_cell();
+    let world = match &a.world {
+        Some(name) => Some(
+            topspin_sim::worlds::world_named(&cal, name)
+                .ok_or_else(|| BadInput(format!("--world {name}: no such world (see topspin eval worlds)")))?
+                .with_launcher_axes(),
+        ),
+        None => None,
+    };
     let mut runtime = topspin_daemon::runtime::daemon::RuntimeConfig::loopback();
     runtime.servo_compensation = !a.no_lag_comp;
     runtime.correction = a.correction;
@@ -124,12 +142,15 @@ pub fn run(a: DemoArgs) -> anyhow::Result<()> {
         late_limit: a.late_limit,
         tracker_faults: a.tracker_faults.then(topspin_sim::faults::TrackerFaults::all),
         start_joints: a.start_joints,
+        world,
+        strokes: a.strokes,
         ..DemoConfig::default()
     };
     if !a.json {
         eprintln!(
-            "topspin demo: {} balls, {} mm tracker noise, daemon and mock KR C4 (4 ms RSI) on loopback, about {:.0} s",
+            "topspin demo: {} {} balls, {} mm tracker noise, daemon and mock KR C4 (4 ms RSI) on loopback, about {:.0} s",
             a.balls,
+            a.strokes,
             a.noise_mm,
             a.balls as f64 * a.gap + 1.5
         );
@@ -144,6 +165,17 @@ pub fn run(a: DemoArgs) -> anyhow::Result<()> {
         print!("{}", table(&report));
     }
     Ok(())
+}
+
+/// " (2 low, 1 wide)", or nothing when every ball was reachable.
+fn out_of_reach(o: &topspin_sim::demo::OutOfReach) -> String {
+    let parts: Vec<String> =
+        [(o.no_crossing, "no crossing after the bounce"), (o.wide, "wide"), (o.low, "low"), (o.high, "high")]
+            .iter()
+            .filter(|(n, _)| *n > 0)
+            .map(|(n, what)| format!("{n} {what}"))
+            .collect();
+    if parts.is_empty() { String::new() } else { format!(" ({})", parts.join(", ")) }
 }
 
 fn rps(v: &[f64; 3]) -> String {
@@ -197,14 +229,29 @@ pub fn table(r: &DemoReport) -> String {
     let _ = writeln!(
         out,
         "\n{} of {} reachable balls hit ({:.1}%; bat within {:.0} mm of the ball within ±{} ms of the true crossing), \
-         {} out of reach",
+         {} out of reach{}",
         r.hits,
         r.reachable,
         r.hit_rate * 100.0,
         HIT_RADIUS * 1e3,
         HIT_WINDOW.0 / 1_000_000,
-        r.balls - r.reachable
+        r.balls - r.reachable,
+        out_of_reach(&r.out_of_reach)
     );
+    let o = &r.strokes_out_of_play;
+    if o.total() > 0 {
+        let _ = writeln!(
+            out,
+            "{} strokes: {} drawn states passed over, never on the robot's half (net {}, long {}, wide {}, serve \
+             faults {})",
+            r.strokes,
+            o.total(),
+            o.net,
+            o.long,
+            o.wide,
+            o.serve
+        );
+    }
     let fails: Vec<String> = topspin_sim::returns::ReturnFail::ALL
         .iter()
         .filter(|f| r.return_fails.get(**f) > 0)
@@ -212,11 +259,16 @@ pub fn table(r: &DemoReport) -> String {
         .collect();
     let _ = writeln!(
         out,
-        "{} of {} reachable balls returned ({:.1}%; the bat's actual pose and velocity at contact, the rubber's \
+        "{} of {} reachable balls returned ({:.1}%{}; the bat's actual pose and velocity at contact, the rubber's \
          contact model, over the net onto the opponent's half){}",
         r.returns,
         r.reachable,
         r.return_rate * 100.0,
+        if r.balls > r.reachable {
+            format!(", {:.1}% of all {} balls", r.return_rate_all * 100.0, r.balls)
+        } else {
+            String::new()
+        },
         if fails.is_empty() { String::new() } else { format!("; not returned: {}", fails.join(", ")) }
     );
     let _ = writeln!(

@@ -1,4 +1,5 @@
-//! `topspin sim`: simulated launcher balls as the tracker sees them, written
+//! `topspin sim`: simulated balls (the launcher's, or real human strokes)
+//! as the tracker sees them, written
 //! as files (`--out DIR`: one CSV and one truth JSON per ball, and a
 //! back-to-back stream.csv) and/or streamed live as TTB1 datagrams over UDP
 //! (`--to ADDR`). The content is deterministic in `--seed`; only the
@@ -53,6 +54,11 @@ pub struct SimOptions {
     /// topspin-high); ball k takes setting k mod their number.
     #[arg(long, default_value = "all")]
     pub setting: String,
+    /// Where the balls come from: `launcher` (the settings above), or real
+    /// human strokes measured right after the racket: `human-rally`,
+    /// `human-serve`, `human` (both).
+    #[arg(long, default_value_t = sim::Strokes::Launcher, value_name = "SOURCE")]
+    pub strokes: sim::Strokes,
     /// Tracker noise, standard deviation per axis, mm.
     #[arg(long, default_value_t = 2.0, allow_negative_numbers = true)]
     pub noise_mm: f64,
@@ -164,10 +170,37 @@ pub fn run(args: SimArgs) -> anyhow::Result<()> {
     let prop = p.cal.propagator();
     let x_hit = p.cal.strike.hit_plane_x;
     let mut balls = Vec::with_capacity(a.balls);
-    for k in 0..a.balls {
-        let setting = p.settings[k % p.settings.len()];
-        let ball = sim::simulate_ball(a.seed, k, setting, &prop, x_hit, &p.tracker).map_err(|e| bad(e.to_string()))?;
-        balls.push(ball);
+    if a.strokes == sim::Strokes::Launcher {
+        for k in 0..a.balls {
+            let setting = p.settings[k % p.settings.len()];
+            let ball =
+                sim::simulate_ball(a.seed, k, setting, &prop, x_hit, &p.tracker).map_err(|e| bad(e.to_string()))?;
+            balls.push(ball);
+        }
+    } else {
+        if a.setting.trim() != "all" {
+            return Err(bad("--setting chooses launcher balls; it does not apply with --strokes human-…"));
+        }
+        let (human, o) = sim::simulate_in(None, a.strokes, &p.cal, a.seed, a.balls, &p.tracker);
+        if human.len() < a.balls {
+            return Err(bad(format!(
+                "--strokes {}: {} of {} balls never reached the robot's half",
+                a.strokes,
+                a.balls - human.len(),
+                a.balls
+            )));
+        }
+        eprintln!(
+            "topspin sim: {} states of {} passed over, never on the robot's half (net {}, long {}, wide {}, serve \
+             faults {})",
+            o.total(),
+            a.strokes,
+            o.net,
+            o.long,
+            o.wide,
+            o.serve
+        );
+        balls = human;
     }
     let ends: Vec<f64> = balls.iter().map(|b| b.truth.end_t).collect();
     let starts = sim::schedule(&ends, a.gap);

@@ -32,7 +32,7 @@ use crate::render::{BallColour, Scene, Sequence, SequenceOptions, render_sequenc
 use crate::returns::{BatPath, ContactReport, ReturnFail, ReturnFails, judge_return};
 use crate::stream::{capture_time, stream};
 use crate::truth::Flight;
-use crate::{SimBall, TrackerModel, schedule};
+use crate::{Redraws, SimBall, Strokes, TrackerModel, schedule};
 use topspin_core::calib::Calibration;
 use topspin_core::calib::camera::CameraCalib;
 use topspin_core::ingest::IngestCounters;
@@ -92,6 +92,12 @@ pub struct DemoConfig {
     /// bat is brought home and the run ends, s (with no balls: the whole
     /// run, the arm idle at home).
     pub tail_s: f64,
+    /// The world the balls fly in ([`crate::worlds`]: air and table other
+    /// than the calibration's, each ball its own); `None`: the
+    /// calibration's physics. The daemon still knows only the calibration.
+    pub world: Option<crate::worlds::World>,
+    /// Where the balls come from: the launcher or human strokes.
+    pub strokes: Strokes,
 }
 
 /// After a live client connects, time given it to subscribe.
@@ -115,6 +121,8 @@ impl Default for DemoConfig {
             tracker_thread: ThreadSpec::default(),
             start_joints: None,
             tail_s: 0.6,
+            world: None,
+            strokes: Strokes::Launcher,
         }
     }
 }
@@ -166,6 +174,11 @@ pub struct DemoReport {
     pub return_rate: f64,
     /// The reachable balls not returned, by reason.
     pub return_fails: ReturnFails,
+    /// Returns over all balls (each bounced on the robot's half), as a
+    /// match counts them.
+    pub return_rate_all: f64,
+    /// The balls out of reach, by where they passed the window.
+    pub out_of_reach: OutOfReach,
     pub late_rsi_answers: u64,
     /// Answers accepted under a stretched deadline that came later than
     /// one cycle (0 unless `answer_deadline` was stretched).
@@ -190,6 +203,10 @@ pub struct DemoReport {
     pub ingest: IngestCounters,
     /// What the tracker fault injector did (`None`: a clean stream).
     pub tracker_faults: Option<InjectedCounts>,
+    /// Where the balls came from, and the human strokes passed over
+    /// because they never reached the robot's half (not balls of the run).
+    pub strokes: Strokes,
+    pub strokes_out_of_play: Redraws,
     /// Corrections the mock KR C4 had to clamp (POSCORR), and whether its
     /// monitor stopped RSI: zero and false unless the daemon commanded
     /// something out of bounds.
@@ -233,6 +250,41 @@ pub fn reachable(cal: &Calibration, ball: &SimBall) -> bool {
     ball.truth.hit.as_ref().is_some_and(|h| cal.strike.in_window(h.pos[1], h.pos[2]))
 }
 
+/// Balls out of the hitting window, by where they pass it.
+#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize)]
+pub struct OutOfReach {
+    /// Never crossed the hitting plane after the bounce (a second bounce,
+    /// or too slow to get there).
+    pub no_crossing: usize,
+    /// Crossed it beside the window (|y| too large).
+    pub wide: usize,
+    /// Crossed it below the window.
+    pub low: usize,
+    /// Crossed it above the window.
+    pub high: usize,
+}
+
+impl OutOfReach {
+    /// Counts the balls of `balls` outside the window of `cal`.
+    pub fn of(cal: &Calibration, balls: &[SimBall]) -> OutOfReach {
+        let w = &cal.strike;
+        let mut o = OutOfReach::default();
+        for b in balls.iter().filter(|b| !reachable(cal, b)) {
+            *match &b.truth.hit {
+                None => &mut o.no_crossing,
+                Some(h) if !(w.window_y[0]..=w.window_y[1]).contains(&h.pos[1]) => &mut o.wide,
+                Some(h) if h.pos[2] < w.window_z[0] => &mut o.low,
+                Some(_) => &mut o.high,
+            } += 1;
+        }
+        o
+    }
+
+    pub fn total(&self) -> usize {
+        self.no_crossing + self.wide + self.low + self.high
+    }
+}
+
 /// What one loopback session produced, before judging.
 #[derive(Debug)]
 pub struct LoopbackRun {
@@ -243,6 +295,8 @@ pub struct LoopbackRun {
     pub mock: mock_krc::MockResult,
     pub daemon: DaemonSummary,
     pub injected: Option<InjectedCounts>,
+    /// Human strokes passed over (see [`DemoReport::strokes_out_of_play`]).
+    pub redraws: Redraws,
     /// What the OS refused of [`DemoConfig::tracker_thread`].
     pub tracker_warnings: Vec<RtWarning>,
 }
@@ -252,20 +306,22 @@ pub fn run(cfg: &DemoConfig, cal: &Calibration) -> std::io::Result<DemoReport> {
     let r = run_loopback(cfg, cal)?;
     let mut report = judge(cal, &cfg.runtime, &r.balls, &r.starts, r.t0, &r.mock, &r.daemon);
     report.tracker_faults = r.injected;
+    report.strokes = cfg.strokes;
+    report.strokes_out_of_play = r.redraws;
     Ok(report)
 }
 
 /// The simulated tracker, the daemon threads and the mock KR C4 on
 /// loopback for `cfg.balls` balls; the bat brought home at the end.
 pub fn run_loopback(cfg: &DemoConfig, cal: &Calibration) -> std::io::Result<LoopbackRun> {
-    let balls = crate::simulate_set(cal, cfg.seed, cfg.balls, &cfg.tracker);
+    let (balls, redraws) = crate::simulate_in(cfg.world.as_ref(), cfg.strokes, cal, cfg.seed, cfg.balls, &cfg.tracker);
     let ends: Vec<f64> = balls.iter().map(|b| b.truth.end_t).collect();
     let starts = schedule(&ends, cfg.gap);
 
     let mut rcfg = cfg.runtime.clone();
     let crops = rcfg.logo.as_mut().map(|l| {
         l.camera_latency = Duration::from_nanos((cfg.tracker.latency * 1e9) as u64);
-        render_crops(cal, &l.camera, cfg.seed, &balls)
+        render_crops(&l.camera, cfg.seed, &balls)
     });
     // The simulated tracker's capture-to-arrival latency is known here; on
     // the robot it is measured once and configured (tracker.fixed_latency_ms).
@@ -380,7 +436,7 @@ pub fn run_loopback(cfg: &DemoConfig, cal: &Calibration) -> std::io::Result<Loop
     }
     let mock = mock.stop()?;
     let daemon = daemon.join()?;
-    Ok(LoopbackRun { balls, starts, t0, mock, daemon, injected, tracker_warnings })
+    Ok(LoopbackRun { balls, starts, t0, mock, daemon, injected, redraws, tracker_warnings })
 }
 
 /// The daemon configuration the demo amounts to (tracker noise and latency).
@@ -467,6 +523,8 @@ fn judge(
         returns,
         return_rate: if reach.is_empty() { 0.0 } else { returns as f64 / reach.len() as f64 },
         return_fails,
+        return_rate_all: if balls.is_empty() { 0.0 } else { returns as f64 / balls.len() as f64 },
+        out_of_reach: OutOfReach::of(cal, balls),
         late_rsi_answers: mock.late,
         answers_after_cycle: mock.answers_after_cycle,
         rsi_cycles: mock.cycles,
@@ -483,6 +541,8 @@ fn judge(
         warnings: summary.warnings.iter().map(|w| w.to_string()).collect(),
         ingest: summary.ingest,
         tracker_faults: None,
+        strokes: Strokes::Launcher,
+        strokes_out_of_play: Redraws::default(),
         poscorr_clamped: mock.poscorr_clamped,
         stopped_by_monitor: mock.stopped_by_monitor,
         robot: RobotReport {
@@ -516,7 +576,6 @@ pub(crate) fn judge_strokes(
     path: &[mock_krc::PathSample],
     last_plans: &[StrikePlan],
 ) -> Vec<BallVerdict> {
-    let prop = cal.propagator();
     let robot = &cal.robot;
     let bat_path = BatPath::new(robot, path);
     let mut per_ball = Vec::new();
@@ -528,12 +587,12 @@ pub(crate) fn judge_strokes(
         let t_hit = capture_time(t0, starts[k], hit.t);
         let launch = truth.to_launch();
         let launched = capture_time(t0, starts[k], 0.0);
-        let closest = closest_approach(&bat_path, &launch, &prop, launched, t_hit);
+        let closest = closest_approach(&bat_path, &launch, &ball.physics, launched, t_hit);
         let plan = matching_plan(last_plans, t_hit);
         let est = plan.map(|p| p.spin);
         let true_hit = Vec3::new(hit.pos[0], hit.pos[1], hit.pos[2]);
         let tracking_err_mm = plan.and_then(|p| bat_path.at(p.hit_time).map(|b| (b.centre - p.position).norm() * 1e3));
-        let ret = judge_return(cal, &launch, launched, hit.t, &bat_path);
+        let ret = judge_return(cal, &ball.physics, &launch, launched, hit.t, &bat_path);
         per_ball.push(BallVerdict {
             ball: k,
             setting: truth.setting.to_string(),
@@ -587,11 +646,10 @@ fn closest_approach(
 
 /// Renders each ball's pass through the ceiling camera's strip (orange
 /// ball, the frames before the bounce).
-fn render_crops(cal: &Calibration, cam: &CameraCalib, seed: u64, balls: &[SimBall]) -> Vec<Sequence> {
-    let prop = cal.propagator();
+fn render_crops(cam: &CameraCalib, seed: u64, balls: &[SimBall]) -> Vec<Sequence> {
     let scene = Scene::new(cam.clone(), BallColour::Orange);
     let opts = SequenceOptions { frames: topspin_core::logo::stream::SEQUENCE_LEN };
-    let render = |b: &SimBall| render_sequence(&scene, &b.truth, &prop, seed, b.index, &opts);
+    let render = |b: &SimBall| render_sequence(&scene, &b.truth, &b.physics, seed, b.index, &opts);
     // One chunk of balls per core, in order (no thread pool in the sim crate).
     let workers = std::thread::available_parallelism().map_or(1, |n| n.get());
     let chunk = balls.len().div_ceil(workers).max(1);

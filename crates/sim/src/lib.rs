@@ -5,6 +5,7 @@
 //! and the loopback demo that judges every stroke on the truth.
 //!
 //! - [`launcher`]: the paper's nine launcher settings and aiming.
+//! - [`strokes`]: the balls' source: the launcher, or real human strokes.
 //! - [`truth`]: ground truth of a flight (bounce, net, hitting plane).
 //! - [`tracker`]: sampling, noise, dropouts and false detections.
 //! - [`stream`]: the simulated tracker on the network (TTB1, paced).
@@ -34,6 +35,7 @@ pub mod render;
 pub mod returns;
 pub mod stream;
 pub mod strikes;
+pub mod strokes;
 pub mod tracker;
 pub mod truth;
 pub mod world;
@@ -43,6 +45,7 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
 pub use launcher::{Launch, NoValidShot, Power, Setting, SpinAxis, SpinType, launch, launch_with};
+pub use strokes::{Redraws, Strokes};
 pub use tracker::{SimObservation, TrackerModel, observe};
 pub use truth::{Truth, true_state_at};
 
@@ -52,10 +55,49 @@ use topspin_core::physics::Propagator;
 /// `n` simulated balls cycling through the nine settings; balls whose shot
 /// cannot be aimed (never with the shipped calibration) are skipped.
 pub fn simulate_set(cal: &Calibration, seed: u64, n: usize, tracker: &TrackerModel) -> Vec<SimBall> {
-    let prop = cal.propagator();
-    (0..n)
-        .filter_map(|k| simulate_ball(seed, k, Setting::ALL[k % 9], &prop, cal.strike.hit_plane_x, tracker).ok())
-        .collect()
+    simulate_in(None, Strokes::Launcher, cal, seed, n, tracker).0
+}
+
+/// `n` balls of `strokes` in `world` ([`worlds::World`]; `None`: the
+/// calibration's own physics, every ball alike) on the cell of `cal`, and
+/// the human states passed over because they never reached the robot's
+/// half. Balls that cannot be had (a launcher shot that cannot be aimed,
+/// 64 human draws out of play) are skipped.
+pub fn simulate_in(
+    world: Option<&worlds::World>,
+    strokes: Strokes,
+    cal: &Calibration,
+    seed: u64,
+    n: usize,
+    tracker: &TrackerModel,
+) -> (Vec<SimBall>, Redraws) {
+    let mut redraws = Redraws::default();
+    if strokes == Strokes::Launcher {
+        let balls = match world {
+            Some(world) => worlds::simulate_world(world, cal, seed, n, tracker),
+            None => {
+                let prop = cal.propagator();
+                (0..n)
+                    .filter_map(|k| {
+                        simulate_ball(seed, k, Setting::ALL[k % 9], &prop, cal.strike.hit_plane_x, tracker).ok()
+                    })
+                    .collect()
+            }
+        };
+        return (balls, redraws);
+    }
+    let hit_x = cal.strike.hit_plane_x;
+    let balls = (0..n)
+        .filter_map(|k| {
+            let physics = world.map_or_else(|| cal.propagator(), |w| worlds::ball_physics(w, cal, seed, k));
+            let (mut rng_l, mut rng_t) = ball_rngs(seed, k);
+            let l = strokes::draw_human(strokes, &physics, &mut rng_l, &mut redraws)?;
+            let truth = Truth::compute(&l, &physics, hit_x);
+            let observations = observe(&truth, &physics, tracker, 0.0, &mut rng_t);
+            Some(SimBall { index: k, truth, observations, physics })
+        })
+        .collect();
+    (balls, redraws)
 }
 
 /// Shortest quiet time between one flight's end and the next launch, s.
@@ -79,6 +121,9 @@ pub struct SimBall {
     pub index: usize,
     pub truth: Truth,
     pub observations: Vec<SimObservation>,
+    /// The physics this ball flies: its world's, with its own drag and
+    /// lift (what the judges fly it with).
+    pub physics: Propagator,
 }
 
 impl SimBall {
@@ -101,7 +146,7 @@ pub fn simulate_ball(
     let l = launch(setting, prop, hit_plane_x, &mut rng_l)?;
     let truth = Truth::compute(&l, prop, hit_plane_x);
     let observations = observe(&truth, prop, tracker, 0.0, &mut rng_t);
-    Ok(SimBall { index: k, truth, observations })
+    Ok(SimBall { index: k, truth, observations, physics: *prop })
 }
 
 /// Launch times of balls back to back: one every `gap` s, but never before

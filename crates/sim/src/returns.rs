@@ -360,12 +360,19 @@ fn returning_tilts(prop: &Propagator, racket: &RacketModel, ball: &BallState, ba
     best
 }
 
-/// Judges the return of one ball: `launch` at `start`, its true crossing
-/// of the hitting plane `t_hit` s after launch, the bat's actual `path`.
-pub fn judge_return(cal: &Calibration, launch: &Launch, start: Instant, t_hit: f64, path: &BatPath) -> ReturnJudgement {
-    let prop = cal.propagator();
+/// Judges the return of one ball: `launch` at `start` flying the physics
+/// `prop` (in and out), its true crossing of the hitting plane `t_hit` s
+/// after launch, the bat's actual `path`.
+pub fn judge_return(
+    cal: &Calibration,
+    prop: &Propagator,
+    launch: &Launch,
+    start: Instant,
+    t_hit: f64,
+    path: &BatPath,
+) -> ReturnJudgement {
     let racket = cal.racket_model();
-    let flight = Flight::new(launch, &prop);
+    let flight = Flight::new(launch, prop);
     let bat_radius = racket.params.bat_radius;
     let touch = match find_touch(&flight, start, t_hit, path, racket.radius, bat_radius) {
         Ok(t) => t,
@@ -388,11 +395,11 @@ pub fn judge_return(cal: &Calibration, launch: &Launch, start: Instant, t_hit: f
         return ReturnJudgement::no_contact("speed: the bat was running away from the ball".to_owned());
     };
     let after = impact.after;
-    let (fail, landing) = fly_return(&prop, &after, touch.t);
+    let (fail, landing) = fly_return(prop, &after, touch.t);
     let bat = &touch.bat;
     let n = bat.normal;
     let tilt = face_tilt(&n).to_degrees();
-    let returning = fail.map(|_| returning_tilts(&prop, &racket, &touch.ball, bat, touch.t));
+    let returning = fail.map(|_| returning_tilts(prop, &racket, &touch.ball, bat, touch.t));
     let why = returning.map(|r| match r {
         Some([lo, hi]) if tilt < lo => {
             format!("angle: face {tilt:+.1}°, {:.1}° too closed ({lo:+.0}…{hi:+.0}° return it)", lo - tilt)
@@ -521,7 +528,7 @@ mod tests {
         let (launch, s, t_hit) = ball(&cal);
         let (o, v) = aimed(&cal, &s);
         let p = path(t_hit, o, |dt| s.pos + v * dt);
-        let j = judge_return(&cal, &launch, START, t_hit, &p);
+        let j = judge_return(&cal, &cal.propagator(), &launch, START, t_hit, &p);
         assert!(j.returned(), "{j:?}");
         let c = j.contact.expect("a contact");
         // The face meets the ball's surface before its centre reaches the plan.
@@ -539,12 +546,12 @@ mod tests {
         let (o, v) = aimed(&cal, &s);
         // 0.3 m to the side until 60 ms after the ball has passed.
         let p = path(t_hit, o, |dt| if dt < 0.06 { s.pos + Vec3::new(0.0, 0.3, 0.0) } else { s.pos + v * dt });
-        let j = judge_return(&cal, &launch, START, t_hit, &p);
+        let j = judge_return(&cal, &cal.propagator(), &launch, START, t_hit, &p);
         assert_eq!(j.fail, Some(ReturnFail::NoContact), "{j:?}");
         assert!(j.why.as_deref().is_some_and(|w| w.starts_with("position")), "{:?}", j.why);
         // A bat that stays far behind the ball's path never meets it.
         let p = path(t_hit, o, |_| s.pos + Vec3::new(0.4, 0.0, 0.0));
-        let j = judge_return(&cal, &launch, START, t_hit, &p);
+        let j = judge_return(&cal, &cal.propagator(), &launch, START, t_hit, &p);
         assert_eq!(j.fail, Some(ReturnFail::NoContact));
         assert!(j.why.as_deref().is_some_and(|w| w.starts_with("timing")), "{:?}", j.why);
     }
@@ -556,7 +563,7 @@ mod tests {
         let (o, v) = aimed(&cal, &s);
         let open = EulerZyx { b: o.b + 15f64.to_radians(), ..o };
         let p = path(t_hit, open, |dt| s.pos + v * dt);
-        let j = judge_return(&cal, &launch, START, t_hit, &p);
+        let j = judge_return(&cal, &cal.propagator(), &launch, START, t_hit, &p);
         assert_eq!(j.fail, Some(ReturnFail::Long), "{j:?}");
         let why = j.why.expect("a reason");
         assert!(why.starts_with("angle") && why.contains("too open"), "{why}");

@@ -73,7 +73,7 @@ pub struct Truth {
     pub spin: [f64; 3],
     /// ‖spin‖ in revolutions per second, for people.
     pub spin_rps: f64,
-    /// The first table contact, or null.
+    /// The first table contact on the robot's half, or null.
     pub bounce: Option<BounceTruth>,
     /// When the ball crossed the net plane x = 0, s, or null.
     pub net_crossing_t: Option<f64>,
@@ -115,7 +115,8 @@ impl Truth {
         let end_t = loop {
             match prop.advance(&mut s, &mut t, &stop) {
                 Event::Bounce { t, before } => {
-                    if bounce.is_none() {
+                    // A serve's bounce on its own half is not the one played.
+                    if bounce.is_none() && before.pos.x > 0.0 {
                         bounce = Some(BounceTruth {
                             t,
                             pos: before.pos.into(),

@@ -18,7 +18,7 @@ use crate::demo::{BallVerdict, DemoConfig, LEAD_IN, demo_daemon_config, judge_st
 use crate::faults::{InjectedCounts, Sender, inject, plan_datagrams};
 use crate::mock_krc::pair::Pair;
 use crate::mock_krc::{Faults, MockKrcConfig, MockResult};
-use crate::{SimBall, schedule, simulate_set};
+use crate::{SimBall, schedule, simulate_in};
 use topspin_core::calib::Calibration;
 use topspin_core::estimator::Estimator;
 use topspin_core::ingest::{Ingest, IngestCounters};
@@ -72,7 +72,7 @@ impl VirtualRun {
 /// last stroke is done and the bat is home (`cfg.tracker_faults` applied;
 /// the live view, recording and logo thread of `cfg` are not part of it).
 pub fn run_virtual(cfg: &DemoConfig, cal: &Calibration) -> VirtualRun {
-    let balls = simulate_set(cal, cfg.seed, cfg.balls, &cfg.tracker);
+    let (balls, _) = simulate_in(cfg.world.as_ref(), cfg.strokes, cal, cfg.seed, cfg.balls, &cfg.tracker);
     let ends: Vec<f64> = balls.iter().map(|b| b.truth.end_t).collect();
     let starts = schedule(&ends, cfg.gap);
     let t0 = START + Duration::from_nanos((LEAD_IN * 1e9) as u64);

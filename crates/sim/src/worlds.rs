@@ -49,6 +49,14 @@ pub struct World {
     pub axis: SpinAxis,
 }
 
+impl World {
+    /// This world's balls from a wheel launcher: spin axes perpendicular
+    /// to the exit velocity (the cell's launcher, and the goals' setting).
+    pub fn with_launcher_axes(self) -> World {
+        World { axis: SpinAxis::Perpendicular, ..self }
+    }
+}
+
 /// Ball-to-ball variation of the drag (seam, surface, a dented ball).
 const BALL_DRAG: (f64, f64) = (0.95, 1.10);
 /// Ball-to-ball variation of the lift.
@@ -169,6 +177,13 @@ fn ball_scales(world: &World, seed: u64, k: usize) -> FlightScales {
     FlightScales { drag: draw(world.ball_drag), lift: draw(world.ball_lift) }
 }
 
+/// The physics ball `k` of `world` flies: the world's, with its own drag
+/// and lift.
+pub fn ball_physics(world: &World, cal: &Calibration, seed: u64, k: usize) -> Propagator {
+    let prop = Propagator::new(world.physics.flight_model(), world.physics.bounce_model(), cal.table);
+    prop.with_scales(ball_scales(world, seed, k))
+}
+
 /// `n` balls of `world` on the cell of `cal`, cycling through the nine
 /// settings, seen by `tracker`; balls its launcher cannot aim are skipped.
 pub fn simulate_world(world: &World, cal: &Calibration, seed: u64, n: usize, tracker: &TrackerModel) -> Vec<SimBall> {
@@ -184,14 +199,13 @@ pub fn simulate_world_ball(
     k: usize,
     tracker: &TrackerModel,
 ) -> Option<SimBall> {
-    let prop = Propagator::new(world.physics.flight_model(), world.physics.bounce_model(), cal.table);
     let hit_x = cal.strike.hit_plane_x;
     let (mut rng_l, mut rng_t) = ball_rngs(seed, k);
-    let ball = prop.with_scales(ball_scales(world, seed, k));
+    let ball = ball_physics(world, cal, seed, k);
     let l = launch_with(Setting::ALL[k % 9], world.axis, &ball, hit_x, &mut rng_l).ok()?;
     let truth = Truth::compute(&l, &ball, hit_x);
     let observations = observe(&truth, &ball, tracker, 0.0, &mut rng_t);
-    Some(SimBall { index: k, truth, observations })
+    Some(SimBall { index: k, truth, observations, physics: ball })
 }
 
 #[cfg(test)]
