@@ -109,11 +109,37 @@ fn streams_one_ball_over_udp() {
 }
 
 #[test]
+fn human_serves_are_written_with_their_truth() {
+    // Real serves: launched behind the opponent's end, a bounce on their
+    // own half, then the one on the robot's half that the truth records.
+    let dir = temp_dir("serves");
+    let out = run_to(&dir, &["--balls", "3", "--seed", "2", "--strokes", "human-serve"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    for k in 0..3 {
+        let json: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(dir.join(format!("ball-{k:03}.json"))).unwrap()).unwrap();
+        let launch_x = json["launch"]["pos"][0].as_f64().unwrap();
+        let bounce = &json["bounce"];
+        assert!(launch_x < -1.0, "{launch_x}");
+        assert!(bounce["pos"][0].as_f64().unwrap() > 0.0);
+        assert!(json["net_crossing_t"].as_f64().unwrap() < bounce["t"].as_f64().unwrap());
+        // Human serves spin slowly next to the launcher's 20–100 rps.
+        assert!(json["spin_rps"].as_f64().unwrap() < 20.0, "{}", json["spin_rps"]);
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
 fn unusable_input_exits_2_with_one_line() {
     let dir = temp_dir("bad");
-    for args in
-        [vec!["--setting", "curveball-low"], vec!["--noise-mm", "-1"], vec!["--rate", "0"], vec!["--physics", "vacuum"]]
-    {
+    for args in [
+        vec!["--setting", "curveball-low"],
+        vec!["--noise-mm", "-1"],
+        vec!["--rate", "0"],
+        vec!["--physics", "vacuum"],
+        vec!["--strokes", "elite"],
+        vec!["--strokes", "human", "--setting", "topspin-low"],
+    ] {
         let out = run_to(&dir, &args);
         assert_eq!(out.status.code(), Some(2), "{args:?}");
         let err = String::from_utf8(out.stderr).unwrap();
