@@ -31,7 +31,7 @@ use crate::mock_krc::{self, MockKrcConfig};
 use crate::render::{BallColour, Scene, Sequence, SequenceOptions, render_sequence};
 use crate::returns::{BatPath, ContactReport, ReturnFail, ReturnFails, judge_return};
 use crate::stream::{capture_time, stream};
-use crate::truth::Flight;
+use crate::truth::{Flight, HitTruth};
 use crate::{Redraws, SimBall, Strokes, TrackerModel, schedule};
 use topspin_core::calib::Calibration;
 use topspin_core::calib::camera::CameraCalib;
@@ -245,9 +245,25 @@ pub struct RobotReport {
     pub rates_over: u64,
 }
 
-/// The ball's true hitting point lies in the hitting window.
+/// The ball's true hitting point on the hitting plane lies in the window.
 pub fn reachable(cal: &Calibration, ball: &SimBall) -> bool {
     ball.truth.hit.as_ref().is_some_and(|h| cal.strike.in_window(h.pos[1], h.pos[2]))
+}
+
+/// Where the ball can be met, as the estimator would choose with the truth
+/// in hand: its crossing of the hitting plane where that lies in the
+/// window, else of the nearest other plane of the hitting volume
+/// (`strike.hit_depth_x`; the later of two) where that does. `None`: out
+/// of reach.
+pub fn meeting(cal: &Calibration, ball: &SimBall) -> Option<HitTruth> {
+    let planes = cal.strike.hitting_planes();
+    let home = planes.iter().position(|x| *x == cal.strike.hit_plane_x).unwrap_or(0);
+    let n = planes.len();
+    let order = std::iter::once(home).chain((1..n).flat_map(|d| [home + d, home.wrapping_sub(d)])).filter(|k| *k < n);
+    order
+        .filter_map(|k| ball.truth.crossing_at(&ball.physics, planes[k]).map(|h| (planes[k], h)))
+        .find(|(x, h)| cal.strike.in_window_at(*x, h.pos[1], h.pos[2]))
+        .map(|(_, h)| h)
 }
 
 /// Balls out of the hitting window, by where they pass it.
@@ -256,7 +272,8 @@ pub struct OutOfReach {
     /// Never crossed the hitting plane after the bounce (a second bounce,
     /// or too slow to get there).
     pub no_crossing: usize,
-    /// Crossed it beside the window (|y| too large).
+    /// Crossed the hitting plane beside the window (|y| too large), and no
+    /// other plane of the volume in it either.
     pub wide: usize,
     /// Crossed it below the window.
     pub low: usize,
@@ -269,7 +286,7 @@ impl OutOfReach {
     pub fn of(cal: &Calibration, balls: &[SimBall]) -> OutOfReach {
         let w = &cal.strike;
         let mut o = OutOfReach::default();
-        for b in balls.iter().filter(|b| !reachable(cal, b)) {
+        for b in balls.iter().filter(|b| meeting(cal, b).is_none()) {
             *match &b.truth.hit {
                 None => &mut o.no_crossing,
                 Some(h) if !(w.window_y[0]..=w.window_y[1]).contains(&h.pos[1]) => &mut o.wide,
@@ -365,7 +382,7 @@ pub fn run_loopback(cfg: &DemoConfig, cal: &Calibration) -> std::io::Result<Loop
                     t: capture_time(t0, start, h.t),
                     pos: Vec3::from(h.pos),
                     vel: Vec3::from(h.vel),
-                    reachable: reachable(cal, b),
+                    reachable: meeting(cal, b).is_some(),
                 })
             })
             .collect(),
@@ -490,10 +507,9 @@ fn viewer_sink(
     Ok(Some(Box::new(topspin_daemon::viewer::ViewerSink::new(cal, live, recording, Some(truth.clone())))))
 }
 
-/// The last plan of the trajectory whose hit is nearest the true one.
-fn matching_plan(plans: &[StrikePlan], t_hit: Instant) -> Option<&StrikePlan> {
-    plans.iter().filter(|p| p.hit_time.0.abs_diff(t_hit.0) < 50_000_000).min_by_key(|p| p.hit_time.0.abs_diff(t_hit.0))
-}
+/// How far a plan's hit time may lie from the ball's true crossing of its
+/// plane for the plan to be this ball's.
+const PLAN_MATCH: Duration = Duration::from_millis(50);
 
 fn judge(
     cal: &Calibration,
@@ -523,7 +539,11 @@ fn judge(
         returns,
         return_rate: if reach.is_empty() { 0.0 } else { returns as f64 / reach.len() as f64 },
         return_fails,
-        return_rate_all: if balls.is_empty() { 0.0 } else { returns as f64 / balls.len() as f64 },
+        return_rate_all: if balls.is_empty() {
+            0.0
+        } else {
+            per_ball.iter().filter(|b| b.returned).count() as f64 / balls.len() as f64
+        },
         out_of_reach: OutOfReach::of(cal, balls),
         late_rsi_answers: mock.late,
         answers_after_cycle: mock.answers_after_cycle,
@@ -578,17 +598,38 @@ pub(crate) fn judge_strokes(
 ) -> Vec<BallVerdict> {
     let robot = &cal.robot;
     let bat_path = BatPath::new(robot, path);
+    let planes = cal.strike.hitting_planes();
     let mut per_ball = Vec::new();
     for (k, ball) in balls.iter().enumerate() {
         let truth = &ball.truth;
         let true_spin = Vec3::new(truth.spin[0], truth.spin[1], truth.spin[2]);
-        let reachable = reachable(cal, ball);
-        let Some(hit) = truth.hit.as_ref() else { continue };
+        let meet = meeting(cal, ball);
+        let reachable = meet.is_some();
+        // The true crossings of the volume's planes; the plan's own plane
+        // is where the bat and the ball are judged.
+        let crossings: Vec<(f64, HitTruth)> =
+            planes.iter().filter_map(|x| truth.crossing_at(&ball.physics, *x).map(|h| (*x, h))).collect();
+        let Some(reference) = meet.or(truth.hit).or(crossings.first().map(|c| c.1)) else { continue };
+        // The last plan whose hit is nearest the ball's true crossing of
+        // the plan's own plane.
+        let on_plans_plane = |p: &StrikePlan| {
+            let dx = |c: &&(f64, HitTruth)| (c.0 - p.position.x).abs();
+            crossings.iter().min_by(|a, b| dx(a).total_cmp(&dx(b))).map(|c| c.1)
+        };
+        let matched = last_plans
+            .iter()
+            .filter_map(|p| {
+                let c = on_plans_plane(p)?;
+                let off = p.hit_time.0.abs_diff(capture_time(t0, starts[k], c.t).0);
+                (off < PLAN_MATCH.0).then_some((p, c, off))
+            })
+            .min_by_key(|m| m.2);
+        let plan = matched.map(|m| m.0);
+        let hit = &matched.map_or(reference, |m| m.1);
         let t_hit = capture_time(t0, starts[k], hit.t);
         let launch = truth.to_launch();
         let launched = capture_time(t0, starts[k], 0.0);
         let closest = closest_approach(&bat_path, &launch, &ball.physics, launched, t_hit);
-        let plan = matching_plan(last_plans, t_hit);
         let est = plan.map(|p| p.spin);
         let true_hit = Vec3::new(hit.pos[0], hit.pos[1], hit.pos[2]);
         let tracking_err_mm = plan.and_then(|p| bat_path.at(p.hit_time).map(|b| (b.centre - p.position).norm() * 1e3));

@@ -148,6 +148,27 @@ impl Truth {
         }
     }
 
+    /// The crossing of the plane x after the bounce on the robot's half,
+    /// flown with `prop` (the ball's own physics): [`Truth::hit`] for
+    /// another plane of the hitting volume.
+    pub fn crossing_at(&self, prop: &Propagator, x: f64) -> Option<HitTruth> {
+        if x == self.hit_plane_x {
+            return self.hit;
+        }
+        let stop = StopAt { t_max: FLIGHT_T_MAX, hit_plane_x: Some(x), net: false };
+        let (mut s, mut t) = (BallState::from(&self.launch), 0.0);
+        let mut bounced = false;
+        loop {
+            match prop.advance(&mut s, &mut t, &stop) {
+                Event::Bounce { before, .. } => bounced |= before.pos.x > 0.0,
+                Event::HitPlane { t } if bounced => {
+                    return Some(HitTruth { t, pos: s.pos.into(), vel: s.vel.into(), spin: s.spin.into() });
+                }
+                _ => return None,
+            }
+        }
+    }
+
     /// The launch as a [`Launch`] again.
     pub fn to_launch(&self) -> Launch {
         Launch { setting: self.setting, state: (&self.launch).into() }

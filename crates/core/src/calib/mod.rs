@@ -49,8 +49,20 @@ pub const MIN_WINDOW_REACH: f64 = 0.5;
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct StrikeCalib {
-    /// The hitting plane x = hit_plane_x in the table frame, m.
+    /// The hitting plane x = hit_plane_x in the table frame, m: where the
+    /// robot meets the ball when it can.
     pub hit_plane_x: f64,
+    /// The hitting volume's depth: the planes from x = lo to hi (m, every
+    /// [`HIT_DEPTH_STEP_M`], `hit_plane_x` among them) where a ball that
+    /// passes the nominal plane outside the window may be met instead,
+    /// each with the same window. `None`: the nominal plane only.
+    #[serde(default)]
+    pub hit_depth_x: Option<[f64; 2]>,
+    /// The window's y range on the volume's other planes, m (the arm
+    /// reaches less of the window's width nearer the table); `None`: the
+    /// window's.
+    #[serde(default)]
+    pub hit_depth_window_y: Option<[f64; 2]>,
     /// Hitting window on the plane: allowed y range, m (table frame).
     pub window_y: [f64; 2],
     /// Allowed z range of the hitting point, m (table frame).
@@ -119,7 +131,40 @@ fn default_aim_tilt() -> [f64; 2] {
     [-40.0, 40.0]
 }
 
+/// The spacing of the hitting volume's planes, m.
+pub const HIT_DEPTH_STEP_M: f64 = 0.05;
+/// The most planes a hitting volume may hold.
+pub const MAX_HITTING_PLANES: usize = 16;
+
 impl StrikeCalib {
+    /// The hitting volume's depth, [lo, hi] (the nominal plane alone where
+    /// none is configured).
+    pub fn depth(&self) -> [f64; 2] {
+        self.hit_depth_x.unwrap_or([self.hit_plane_x; 2])
+    }
+
+    /// The hitting volume's planes, ascending: `hit_plane_x` and every
+    /// [`HIT_DEPTH_STEP_M`] from it that lies within [`Self::depth`].
+    pub fn hitting_planes(&self) -> heapless::Vec<f64, MAX_HITTING_PLANES> {
+        let [lo, hi] = self.depth();
+        let below = ((self.hit_plane_x - lo) / HIT_DEPTH_STEP_M + 1e-9).floor().max(0.0) as i64;
+        let above = ((hi - self.hit_plane_x) / HIT_DEPTH_STEP_M + 1e-9).floor().max(0.0) as i64;
+        let mut out = heapless::Vec::new();
+        for k in -below..=above {
+            if out.push(self.hit_plane_x + k as f64 * HIT_DEPTH_STEP_M).is_err() {
+                break;
+            }
+        }
+        out
+    }
+
+    /// True when a hitting point at (y, z) on the plane x of the hitting
+    /// volume lies in that plane's window.
+    pub fn in_window_at(&self, x: f64, y: f64, z: f64) -> bool {
+        let wy = if x == self.hit_plane_x { self.window_y } else { self.hit_depth_window_y.unwrap_or(self.window_y) };
+        (wy[0]..=wy[1]).contains(&y) && self.in_window(y, z)
+    }
+
     /// True when a hitting point at (y, z) lies in the hitting window.
     pub fn in_window(&self, y: f64, z: f64) -> bool {
         (self.window_y[0]..=self.window_y[1]).contains(&y) && (self.window_z[0]..=self.window_z[1]).contains(&z)
@@ -345,6 +390,28 @@ impl Calibration {
                 s.aim_bat_speed[0] > 0.0 && s.aim_bat_speed[0] <= s.aim_bat_speed[1],
             ),
             ("strike.aim_bat_speed", s.aim_bat_speed[1], s.aim_bat_speed[1].is_finite()),
+            (
+                "strike.hit_depth_x (lo ≤ hit_plane_x ≤ hi)",
+                s.depth()[0],
+                s.depth().iter().all(|x| x.is_finite())
+                    && s.depth()[0] <= s.hit_plane_x
+                    && s.hit_plane_x <= s.depth()[1],
+            ),
+            (
+                "strike.hit_depth_x (behind the robot's end of the table)",
+                s.depth()[0],
+                s.depth()[0] > table.robot_end_x(),
+            ),
+            (
+                "strike.hit_depth_window_y (within window_y)",
+                s.hit_depth_window_y.map_or(0.0, |w| w[0]),
+                s.hit_depth_window_y.is_none_or(|w| ordered(w) && s.window_y[0] <= w[0] && w[1] <= s.window_y[1]),
+            ),
+            (
+                "strike.hit_depth_x (at most 16 planes, 5 cm apart)",
+                s.depth()[1] - s.depth()[0],
+                s.depth()[1] - s.depth()[0] < MAX_HITTING_PLANES as f64 * HIT_DEPTH_STEP_M,
+            ),
         ];
         for (key, value, ok) in checks {
             if !ok {
@@ -358,23 +425,30 @@ impl Calibration {
         // (the base may be yawed, so check all four).
         let ws = &robot.workspace;
         let inside = |p: crate::physics::Vec3| (0..3).all(|i| (ws.min_xyz_m[i]..=ws.max_xyz_m[i]).contains(&p[i]));
-        for y in strike.window_y {
-            for z in strike.window_z {
-                if !inside(robot.t_to_b(crate::physics::Vec3::new(strike.hit_plane_x, y, z))) {
-                    let key = if inside(robot.t_to_b(crate::physics::Vec3::new(
-                        strike.hit_plane_x,
-                        y,
-                        0.5 * (strike.window_z[0] + strike.window_z[1]),
-                    ))) {
-                        "strike.window_z (outside the robot's workspace)"
-                    } else {
-                        "strike.window_y (outside the robot's workspace)"
-                    };
-                    return Err(CalibError::OutOfRange {
-                        path: path.clone(),
-                        key,
-                        value: if key.contains("window_z") { z } else { y },
-                    });
+        for x in strike.depth() {
+            for y in strike.window_y {
+                for z in strike.window_z {
+                    if !inside(robot.t_to_b(crate::physics::Vec3::new(x, y, z))) {
+                        let mid_z = 0.5 * (strike.window_z[0] + strike.window_z[1]);
+                        let key = if !inside(robot.t_to_b(crate::physics::Vec3::new(x, 0.0, mid_z))) {
+                            "strike.hit_depth_x (outside the robot's workspace)"
+                        } else if inside(robot.t_to_b(crate::physics::Vec3::new(x, y, mid_z))) {
+                            "strike.window_z (outside the robot's workspace)"
+                        } else {
+                            "strike.window_y (outside the robot's workspace)"
+                        };
+                        return Err(CalibError::OutOfRange {
+                            path: path.clone(),
+                            key,
+                            value: if key.contains("window_z") {
+                                z
+                            } else if key.contains("window_y") {
+                                y
+                            } else {
+                                x
+                            },
+                        });
+                    }
                 }
             }
         }
@@ -409,6 +483,18 @@ impl Calibration {
                 value: reach,
             });
         }
+        // And of the volume's nearest and farthest planes.
+        for x in cell.strike.depth() {
+            let reach = cell.window_reach_at(x);
+            if reach < MIN_WINDOW_REACH {
+                return Err(CalibError::OutOfRange {
+                    path,
+                    key: "strike.hit_depth_x (the share of the window on its nearest or farthest plane that the \
+                          arm reaches within joints.min_deg / joints.max_deg; at least 0.5 needed)",
+                    value: x,
+                });
+            }
+        }
         Ok(cell)
     }
 
@@ -418,6 +504,11 @@ impl Calibration {
     /// the software limits and off the singular wrist. The default cell
     /// reaches 0.95 of it (not the high, wide corners).
     pub fn window_reach(&self) -> f64 {
+        self.window_reach_at(self.strike.hit_plane_x)
+    }
+
+    /// [`Self::window_reach`] on the plane x (m, in T).
+    pub fn window_reach_at(&self, x: f64) -> f64 {
         const NY: usize = 13;
         const NZ: usize = 12;
         let arm = self.robot.arm();
@@ -430,7 +521,7 @@ impl Calibration {
                 let y = s.window_y[0] + (s.window_y[1] - s.window_y[0]) * iy as f64 / (NY - 1) as f64;
                 let z = s.window_z[0] + (s.window_z[1] - s.window_z[0]) * iz as f64 / (NZ - 1) as f64;
                 let target = crate::kinematics::Pose {
-                    position: self.robot.t_to_b(crate::physics::Vec3::new(s.hit_plane_x, y, z)),
+                    position: self.robot.t_to_b(crate::physics::Vec3::new(x, y, z)),
                     rotation: home.rotation,
                 };
                 if arm.inverse_near(&target, &home_q).is_ok_and(|q| arm.limits.check_position(&q).is_ok()) {
@@ -466,6 +557,30 @@ mod tests {
     fn compiled_defaults_load() {
         let c = Calibration::default_cell();
         assert!(c.strike.hit_plane_x > c.table.robot_end_x());
+    }
+
+    #[test]
+    fn the_hitting_volume_is_planes_through_its_depth_and_checked() {
+        let c = Calibration::default_cell();
+        let planes = c.strike.hitting_planes();
+        assert_eq!(planes.len(), 4, "{planes:?}");
+        for (x, want) in planes.iter().zip([1.45, 1.50, 1.55, 1.60]) {
+            assert!((x - want).abs() < 1e-12, "{planes:?}");
+        }
+        assert!(planes.contains(&c.strike.hit_plane_x));
+        let plane_only = StrikeCalib { hit_depth_x: None, ..c.strike.clone() };
+        assert_eq!(plane_only.hitting_planes().as_slice(), &[c.strike.hit_plane_x]);
+        let p = Path::new("strike.toml");
+        for (depth, why) in [
+            ("[1.65, 1.70]", "lo ≤ hit_plane_x"),
+            ("[1.20, 1.60]", "behind the robot's end"),
+            ("[1.45, 1.95]", "outside the robot's workspace"),
+        ] {
+            let bad = DEFAULT_STRIKE.replace("hit_depth_x = [1.45, 1.60]", &format!("hit_depth_x = {depth}"));
+            let e = Calibration::from_texts((DEFAULT_PHYSICS, p), (DEFAULT_TABLE, p), (&bad, p), (DEFAULT_ROBOT, p));
+            let e = e.unwrap_err().to_string();
+            assert!(e.contains("strike.hit_depth_x") && e.contains(why), "{depth}: {e}");
+        }
     }
 
     #[test]

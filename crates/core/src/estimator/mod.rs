@@ -25,10 +25,11 @@ use heapless::Vec as HVec;
 
 use crate::calib::AimMode;
 use crate::calib::Calibration;
+use crate::calib::{MAX_HITTING_PLANES, StrikeCalib};
 use crate::fit::outlier::{START_WINDOW, StartFilter};
 use crate::fit::poly::Cubic;
 use crate::fit::refine::SPIN_PRIOR_STD;
-use crate::fit::{Prediction, Sample, magnus, predict};
+use crate::fit::{HitPoint, Prediction, Sample, magnus, predict};
 use crate::motion::MotionLimits;
 use crate::motion::reach::ReachMap;
 use crate::physics::{FlightScales, Propagator, RacketModel, Vec3};
@@ -280,6 +281,8 @@ struct Track {
     batch_from: usize,
     /// A batch has read this flight: its drag replaces the cubic's.
     smoothed: bool,
+    /// The plane of the hitting volume the last plan met the ball on.
+    hit_x: Option<f64>,
 }
 
 /// The estimator: at most one ball tracked at a time (the one coming at
@@ -291,10 +294,12 @@ pub struct Estimator {
     strike: crate::calib::StrikeCalib,
     racket: RacketModel,
     aim_bounds: aim::AimBounds,
-    /// What the arm can do over the hitting window (`strike.aim =
-    /// "landing"`): the aim keeps to the faces it can present and the bat
-    /// speeds it delivers.
-    reach: Option<ReachMap>,
+    /// The hitting volume's planes, ascending (`strike.hit_depth_x`).
+    planes: heapless::Vec<f64, MAX_HITTING_PLANES>,
+    /// What the arm can do over the hitting window on each of them
+    /// (`strike.aim = "landing"`; empty otherwise): the aim keeps to the
+    /// faces it can present and the bat speeds it delivers.
+    reach: Vec<ReachMap>,
     candidate: HVec<Sample, START_WINDOW>,
     track: Option<Track>,
     next_id: u32,
@@ -306,13 +311,14 @@ pub struct Estimator {
     drag_variation: f64,
 }
 
-/// The arm's reach over the calibration's hitting window, for the faces
-/// the aim sets there (its tilt range, heading at the target, the roll).
-fn reach_map(cal: &Calibration) -> ReachMap {
+/// The arm's reach over the calibration's hitting window on the plane x,
+/// for the faces the aim sets there (its tilt range, heading at the
+/// target, the roll).
+fn reach_map(cal: &Calibration, x: f64) -> ReachMap {
     let s = &cal.strike;
     ReachMap::new(
         &MotionLimits::from_robot(&cal.robot),
-        s.hit_plane_x,
+        x,
         s.window_y,
         s.window_z,
         s.aim_tilt_deg.map(f64::to_radians),
@@ -331,7 +337,11 @@ impl Estimator {
             strike: cal.strike.clone(),
             racket: cal.racket_model(),
             aim_bounds: aim::AimBounds::of(&cal.strike),
-            reach: (cal.strike.aim == AimMode::Landing).then(|| reach_map(cal)),
+            planes: cal.strike.hitting_planes(),
+            reach: match cal.strike.aim {
+                AimMode::Landing => cal.strike.hitting_planes().iter().map(|x| reach_map(cal, *x)).collect(),
+                AimMode::Paper => Vec::new(),
+            },
             candidate: HVec::new(),
             track: None,
             next_id: 1,
@@ -544,6 +554,7 @@ impl Estimator {
             batch: None,
             batch_from: 0,
             smoothed: false,
+            hit_x: None,
         });
         out.push(EstimatorEvent::Started { trajectory: id, t: last.t, start_outliers: outliers.len() as u8 });
         self.plan(last.t, out);
@@ -659,7 +670,7 @@ impl Estimator {
         let s = track.ekf.state();
         if track.ekf.bounces >= 2 {
             Some(EndReason::SecondBounce)
-        } else if s.pos.x > self.strike.hit_plane_x + 0.3 {
+        } else if s.pos.x > self.strike.depth()[1] + 0.3 {
             Some(EndReason::PassedRobot)
         } else if s.vel.x < -0.5 {
             Some(EndReason::Returned)
@@ -677,14 +688,15 @@ impl Estimator {
         let state = track.ekf.state();
         let prediction = predict(&track.prop, &state, t, self.strike.hit_plane_x);
         self.last_prediction = Some(prediction);
-        let Some(hit) = prediction.hit else {
-            out.push(EstimatorEvent::Withheld { trajectory: track.id, t, reason: Withheld::NoHit });
-            return;
+        let volume = HittingVolume { strike: &self.strike, planes: &self.planes, reach: &self.reach };
+        let (hit, plane) = match volume.choose(&track.prop, &state, t, &prediction, track.hit_x) {
+            Ok(chosen) => chosen,
+            Err(reason) => {
+                out.push(EstimatorEvent::Withheld { trajectory: track.id, t, reason });
+                return;
+            }
         };
-        if let Err(reason) = stroke::check(&self.strike, &hit, hit.t - t) {
-            out.push(EstimatorEvent::Withheld { trajectory: track.id, t, reason });
-            return;
-        }
+        track.hit_x = Some(self.planes[plane]);
         // The spin the ball flew with (before its bounce) decides the
         // stroke: the spin the table meets, not the flight's reading of it.
         let scale = track.prop.bounce.spin_scale;
@@ -707,7 +719,7 @@ impl Estimator {
                 let target = self.strike.aim_target;
                 let warm = track.aim.as_ref();
                 let p = &hit.state.pos;
-                let bounds = match &self.reach {
+                let bounds = match self.reach.get(plane) {
                     Some(m) => self.aim_bounds.within(aim::ArmReach::at(m, p.y, p.z)),
                     None => self.aim_bounds,
                 };
@@ -736,6 +748,114 @@ impl Estimator {
             spin,
             confidence,
         });
+    }
+}
+
+/// Where along its predicted path the ball is met: the hitting plane, or
+/// the nearest other plane of the volume whose crossing lies in the window
+/// with the arm able to present a face there.
+struct HittingVolume<'a> {
+    strike: &'a StrikeCalib,
+    planes: &'a [f64],
+    /// Per plane, where the aim uses the arm's reach (else empty).
+    reach: &'a [ReachMap],
+}
+
+/// How far inside the window a hitting point on the nominal plane must lie
+/// for the volume's other planes not to be weighed, m: a ball that passes
+/// it at the edge is met where it passes with room to spare.
+const WINDOW_MARGIN_M: f64 = 0.03;
+
+/// The least time before the hit at which a ball's stroke may move to
+/// another plane, s: later, the stroke under way is kept (a late hop asked
+/// the axes for more than their rates allow).
+const PLANE_HOP_LEAD_S: f64 = 0.15;
+
+impl HittingVolume<'_> {
+    /// The hitting point and its plane's index:
+    /// - the plane the last plan of this ball chose, while it works there
+    ///   (a stroke does not hop back and forth, nor later than
+    ///   [`PLANE_HOP_LEAD_S`] before the hit), and nothing once it is too
+    ///   late to change the stroke there or the ball has passed it;
+    /// - else the nominal plane, where the ball passes it at least
+    ///   [`WINDOW_MARGIN_M`] inside the window;
+    /// - else the plane where it passes furthest inside the window (and
+    ///   the arm can present a face there), the nearest to the nominal of
+    ///   equals.
+    ///
+    /// `Err`: why the nominal plane does not work, where none does.
+    fn choose(
+        &self,
+        prop: &Propagator,
+        state: &crate::physics::BallState,
+        t: f64,
+        nominal: &Prediction,
+        last_x: Option<f64>,
+    ) -> Result<(HitPoint, usize), Withheld> {
+        let home = self.planes.iter().position(|x| *x == self.strike.hit_plane_x).unwrap_or(0);
+        let at_home = match nominal.hit {
+            Some(hit) => stroke::check(self.strike, &hit, hit.t - t).map(|()| (hit, home)),
+            None => Err(Withheld::NoHit),
+        };
+        let roomy = at_home.as_ref().is_ok_and(|(hit, _)| self.margin(hit) >= WINDOW_MARGIN_M);
+        if self.planes.len() < 2 || (last_x.is_none() && roomy) {
+            return at_home;
+        }
+        let last = last_x.and_then(|x| self.planes.iter().position(|p| *p == x));
+        if last == Some(home) && matches!(at_home, Ok(_) | Err(Withheld::TooSoon)) {
+            return at_home;
+        }
+        let crossings = crate::fit::predict::crossings::<MAX_HITTING_PLANES>(prop, state, t, self.planes);
+        let on = |k: usize| -> Result<HitPoint, Withheld> {
+            if k == home {
+                return at_home.map(|(hit, _)| hit);
+            }
+            let hit = crossings.get(k).copied().flatten().ok_or(Withheld::NoHit)?;
+            stroke::check(self.strike, &hit, hit.t - t)?;
+            let p = hit.state.pos;
+            if !self.strike.in_window_at(self.planes[k], p.y, p.z) {
+                return Err(Withheld::OutsideY);
+            }
+            let reached = self.reach.get(k).is_none_or(|m| {
+                let arm = aim::ArmReach::at(m, p.y, p.z);
+                arm.caps[..arm.n].iter().any(|c| *c >= self.strike.aim_bat_speed[0])
+            });
+            if reached { Ok(hit) } else { Err(Withheld::OutsideZ) }
+        };
+        if let Some(k) = last {
+            // Past that plane already, or too late to change: the stroke
+            // there is under way.
+            if state.pos.x >= self.planes[k] {
+                return Err(Withheld::TooSoon);
+            }
+            match on(k) {
+                Ok(hit) => return Ok((hit, k)),
+                Err(Withheld::TooSoon) => return Err(Withheld::TooSoon),
+                Err(_) => {}
+            }
+        }
+        // Outwards from the nominal plane (the later of two first): the
+        // first of the largest margins.
+        let n = self.planes.len();
+        let order = std::iter::once(home).chain((1..n).flat_map(|d| [home + d, home.wrapping_sub(d)]));
+        let mut best: Option<(HitPoint, usize, f64)> = None;
+        for k in order.filter(|k| *k < n) {
+            if let Ok(hit) = on(k)
+                && (last.is_none_or(|l| l == k) || hit.t - t >= PLANE_HOP_LEAD_S)
+            {
+                let m = self.margin(&hit);
+                if best.is_none_or(|(_, _, b)| m > b) {
+                    best = Some((hit, k, m));
+                }
+            }
+        }
+        best.map(|(hit, k, _)| (hit, k)).ok_or(at_home.err().unwrap_or(Withheld::NoHit))
+    }
+
+    /// How far inside the window the hitting point lies, m.
+    fn margin(&self, hit: &HitPoint) -> f64 {
+        let (p, s) = (hit.state.pos, self.strike);
+        (p.y - s.window_y[0]).min(s.window_y[1] - p.y).min(p.z - s.window_z[0]).min(s.window_z[1] - p.z)
     }
 }
 

@@ -96,6 +96,45 @@ pub fn predict(prop: &Propagator, state: &BallState, t: f64, hit_plane_x: f64) -
     Prediction { bounce, hit: None, end }
 }
 
+/// The crossings of the planes x = `planes[k]` (ascending, m) towards +x
+/// from `state` at time `t`, on the flight [`predict`] follows (through at
+/// most one bounce on the robot's half): `out[k]` for plane k, `None` where
+/// the ball is past it already or the flight ends first. One integration
+/// for all of them.
+pub fn crossings<const N: usize>(
+    prop: &Propagator,
+    state: &BallState,
+    t: f64,
+    planes: &[f64],
+) -> heapless::Vec<Option<HitPoint>, N> {
+    let prop = &Propagator { dt: prop.dt.max(PREDICT_STEP), ..*prop };
+    let (mut s, mut now) = (*state, t);
+    let (mut bounced, mut ended) = (false, false);
+    let mut out = heapless::Vec::new();
+    for &x in planes.iter().take(N) {
+        let mut crossing = None;
+        if !ended && s.pos.x < x {
+            let stop = StopAt { t_max: t + PREDICTION_HORIZON, hit_plane_x: Some(x), net: true };
+            loop {
+                match prop.advance(&mut s, &mut now, &stop) {
+                    Event::Bounce { before, .. } if before.pos.x <= 0.0 && !bounced => {}
+                    Event::Bounce { .. } if !bounced => bounced = true,
+                    Event::HitPlane { t } => {
+                        crossing = Some(HitPoint { t, state: s });
+                        break;
+                    }
+                    _ => {
+                        ended = true;
+                        break;
+                    }
+                }
+            }
+        }
+        let _ = out.push(crossing);
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -138,5 +177,27 @@ mod tests {
             }
         }
         assert!(n >= 40, "{n} flights reach the plane");
+    }
+
+    #[test]
+    fn crossings_are_the_predictions_of_each_plane() {
+        let cal = Calibration::default_cell();
+        let prop = cal.propagator();
+        let planes = [1.45, 1.50, 1.60, 1.75];
+        let s = BallState::new(Vec3::new(-1.5, 0.1, 0.3), Vec3::new(5.5, -0.2, 1.4), Vec3::new(0.0, 100.0, 0.0));
+        let first = predict(&prop, &s, 0.2, planes[0]);
+        assert_eq!(first.end, FlightEnd::HitPlane, "{first:?}");
+        let c = crossings::<4>(&prop, &s, 0.2, &planes);
+        assert_eq!(c.len(), 4);
+        for (x, got) in planes.iter().zip(&c) {
+            let one = predict(&prop, &s, 0.2, *x).hit.expect("it reaches every plane");
+            let got = got.expect("a crossing");
+            assert!((got.state.pos - one.state.pos).norm() < 1e-6 && (got.t - one.t).abs() < 1e-7, "{x}");
+            assert!((got.state.pos.x - x).abs() < 1e-9);
+        }
+        // Past the first plane already: none there, the others as before.
+        let later = BallState { pos: Vec3::new(1.47, c[0].unwrap().state.pos.y, 0.3), ..c[0].unwrap().state };
+        let c2 = crossings::<4>(&prop, &later, 0.0, &planes);
+        assert!(c2[0].is_none() && c2[1].is_some());
     }
 }

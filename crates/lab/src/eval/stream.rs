@@ -195,7 +195,13 @@ pub(crate) fn run_estimator(
     balls: &[SimBall],
     launches: &[f64],
 ) -> (Vec<(usize, StrikePlan)>, SessionLearned) {
-    let mut est = Estimator::new(cal, cfg);
+    // The prediction's accuracy on the hitting plane, judged there: the
+    // volume's other planes are the stroke's business (the virtual cell).
+    let plane_only = Calibration {
+        strike: topspin_core::calib::StrikeCalib { hit_depth_x: None, ..cal.strike.clone() },
+        ..cal.clone()
+    };
+    let mut est = Estimator::new(&plane_only, cfg);
     let mut plans = Vec::new();
     for (k, (ball, &t0)) in balls.iter().zip(launches).enumerate() {
         for o in &ball.observations {
