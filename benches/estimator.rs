@@ -5,7 +5,8 @@
 //! observation on its own and prints p50 / p99 / p99.9 / max, with the
 //! default stroke (`strike.aim = landing`: the return aimed through the
 //! racket contact model) and with the paper's rule (`paper`) for the
-//! aim's share, and without the pre-bounce batch (`smooth`) for its.
+//! aim's share, without the pre-bounce batch (`smooth`) for its, and on
+//! the hitting plane alone for the hitting volume's.
 
 use std::hint::black_box;
 use topspin_daemon::clock;
@@ -93,6 +94,16 @@ fn benches(c: &mut Criterion) {
     let mut no_spin = cfg;
     no_spin.learn.spin = false;
     percentiles(&obs, &cal, no_spin, "[aim landing, no spin learning]");
+    // The hitting volume's cost: the same stream on the plane alone.
+    let mut plane = cal.clone();
+    plane.strike.hit_depth_x = None;
+    percentiles(&obs, &plane, cfg, "[aim landing, plane alone]");
+    // Start-up: one reach map per plane of the volume.
+    for (label, cal) in [("volume", &cal), ("plane alone", &plane)] {
+        let start = clock::now();
+        black_box(Estimator::new(cal, cfg));
+        println!("estimator/new {label}: {:.1} ms", (clock::now() - start).0 as f64 / 1e6);
+    }
     c.bench_function("estimator/observe_stream_of_45_balls", |b| {
         b.iter(|| {
             let mut est = Estimator::new(&cal, EstimatorConfig::default());
