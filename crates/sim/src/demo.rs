@@ -179,6 +179,9 @@ pub struct DemoReport {
     pub return_rate_all: f64,
     /// The balls out of reach, by where they passed the window.
     pub out_of_reach: OutOfReach,
+    /// The same per stroke type and speed band (the setting a ball is or
+    /// resembles, e.g. `topspin-low`).
+    pub by_setting: std::collections::BTreeMap<String, SettingTally>,
     pub late_rsi_answers: u64,
     /// Answers accepted under a stretched deadline that came later than
     /// one cycle (0 unless `answer_deadline` was stretched).
@@ -279,6 +282,29 @@ pub struct OutOfReach {
     pub low: usize,
     /// Crossed it above the window.
     pub high: usize,
+}
+
+/// One setting's balls in a run: how many, how many reachable, returned.
+#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize)]
+pub struct SettingTally {
+    pub balls: usize,
+    pub reachable: usize,
+    /// Returned, of all balls.
+    pub returned: usize,
+}
+
+/// [`SettingTally`] per setting over `balls` and their verdicts.
+pub fn by_setting(balls: &[SimBall], per_ball: &[BallVerdict]) -> std::collections::BTreeMap<String, SettingTally> {
+    let mut out = std::collections::BTreeMap::<String, SettingTally>::new();
+    for b in balls {
+        out.entry(b.truth.setting.to_string()).or_default().balls += 1;
+    }
+    for v in per_ball {
+        let t = out.entry(v.setting.clone()).or_default();
+        t.reachable += v.reachable as usize;
+        t.returned += v.returned as usize;
+    }
+    out
 }
 
 impl OutOfReach {
@@ -545,6 +571,7 @@ fn judge(
             per_ball.iter().filter(|b| b.returned).count() as f64 / balls.len() as f64
         },
         out_of_reach: OutOfReach::of(cal, balls),
+        by_setting: by_setting(balls, &per_ball),
         late_rsi_answers: mock.late,
         answers_after_cycle: mock.answers_after_cycle,
         rsi_cycles: mock.cycles,

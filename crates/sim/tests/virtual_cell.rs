@@ -141,6 +141,7 @@ fn returns_over_seeds() {
     let (mut rates_over, mut clamped) = (0, 0);
     let mut miss = Vec::new();
     let mut out = [0usize; 4];
+    let mut per_setting = std::collections::BTreeMap::<String, [usize; 3]>::new();
     let (mut plan_err, mut tracking) = (Vec::new(), Vec::new());
     for &seed in &seeds {
         let mut cfg = DemoConfig { balls, seed, world: world.clone(), strokes, ..DemoConfig::default() };
@@ -152,6 +153,12 @@ fn returns_over_seeds() {
         clamped += r.session.safety_clamped;
         all += r.balls.len();
         all_returned += r.per_ball.iter().filter(|b| b.returned).count();
+        for (name, t) in topspin_sim::demo::by_setting(&r.balls, &r.per_ball) {
+            let sum = per_setting.entry(name).or_default();
+            for (s, n) in sum.iter_mut().zip([t.balls, t.reachable, t.returned]) {
+                *s += n;
+            }
+        }
         let o = OutOfReach::of(&cal, &r.balls);
         for (sum, n) in out.iter_mut().zip([o.no_crossing, o.wide, o.low, o.high]) {
             *sum += n;
@@ -177,6 +184,12 @@ fn returns_over_seeds() {
             }
         }
         eprintln!("{}", summary(&r));
+    }
+    for (name, [n, reach, ret]) in &per_setting {
+        eprintln!(
+            "{name:16} {n:4} balls, {reach:4} reachable, {ret:4} returned ({:.1} % of all)",
+            100.0 * *ret as f64 / *n as f64
+        );
     }
     let median = |v: &mut Vec<f64>| {
         v.sort_by(f64::total_cmp);
@@ -256,6 +269,11 @@ fn the_cell_plays_human_rally_strokes_and_serves() {
     assert!(r.balls.iter().any(|b| b.truth.launch.pos[0] > -1.3), "rally strokes from over the table");
     let serves: Vec<_> = r.balls.iter().filter(|b| b.truth.launch.pos[0] < -1.3).collect();
     assert!(!serves.is_empty(), "serves from behind the table");
+    // Judged like a match: per stroke type and speed band, over all balls.
+    let split = topspin_sim::demo::by_setting(&r.balls, &r.per_ball);
+    assert_eq!(split.values().map(|t| t.balls).sum::<usize>(), 27);
+    assert_eq!(split.values().map(|t| t.reachable).sum::<usize>(), r.reachable());
+    assert!(split.values().all(|t| t.returned <= t.balls));
     // Every ball is played off its bounce on the robot's half.
     assert!(r.balls.iter().all(|b| b.truth.bounce.is_some_and(|bn| bn.pos[0] > 0.0)));
     assert!(r.reachable() >= 10, "{}", summary(&r));
