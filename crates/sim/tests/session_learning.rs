@@ -7,7 +7,7 @@
 
 use topspin_core::calib::Calibration;
 use topspin_core::estimator::session::LearnConfig;
-use topspin_core::estimator::{Estimator, EstimatorConfig, EstimatorEvent};
+use topspin_core::estimator::{EndReason, Estimator, EstimatorConfig, EstimatorEvent};
 use topspin_core::plan::StrikePlan;
 use topspin_core::time::Instant;
 use topspin_sim::worlds::{World, simulate_world_ball, world_named};
@@ -229,4 +229,47 @@ fn learning_off_scores_each_ball_as_if_it_were_alone() {
     let on = feed(&mut Estimator::new(&cal, config(LearnConfig::default())), &balls, &launches);
     assert!(!same(&on, &alone(LearnConfig::default())));
     assert!(!same(&on, &off));
+}
+
+#[test]
+fn a_bounce_nothing_explains_is_counted_and_teaches_nothing() {
+    // A ball that clips the table's edge (or a tracker that jumps at the
+    // bounce): after the contact it flies slower along x and faster up
+    // than any table and spin could make it. A small kick passes the
+    // filter's gate and the bounce check names it; a large one loses the
+    // track at the gate. Neither teaches the session anything.
+    let cal = Calibration::default_cell();
+    let world = world_named(&cal, "other-table").unwrap();
+    let (balls, launches) = session(&world, &cal, 12);
+    for (kick, unexplained) in [((-0.6, 0.4), true), ((-1.5, 1.0), false)] {
+        let mut est = Estimator::new(&cal, config(LearnConfig::default()));
+        feed(&mut est, &balls, &launches);
+        let t0 = launches.last().unwrap() + 3.0;
+        let mut out = Default::default();
+        est.poll(Instant::from_secs_f64(t0 - 1.0), &mut out);
+        let before = *est.session();
+        let mut odd = balls[7].clone();
+        let tb = odd.truth.bounce.expect("it bounces").t;
+        for o in odd.observations.iter_mut().filter(|o| o.t > tb) {
+            let dt = o.t - tb;
+            o.pos.x += kick.0 * dt;
+            o.pos.z += kick.1 * dt;
+        }
+        let mut events = Vec::new();
+        for o in &odd.observations {
+            events.extend(est.observe(Instant::from_secs_f64(t0 + o.t), o.pos).events);
+        }
+        let mut out = Default::default();
+        est.poll(Instant::from_secs_f64(t0 + 5.0), &mut out);
+        events.extend(out.events);
+        let named = events.iter().any(|e| matches!(e, EstimatorEvent::BounceUnexplained { .. }));
+        let lost = events.iter().any(|e| matches!(e, EstimatorEvent::Ended { reason: EndReason::Lost, .. }));
+        assert_eq!((named, lost), (unexplained, !unexplained), "{kick:?}: {events:?}");
+        let after = *est.session();
+        assert_eq!(after.unexplained, before.unexplained + u32::from(unexplained));
+        // Neither the table, nor its noise, nor the spin prior moved.
+        assert_eq!((after.restitution, after.friction), (before.restitution, before.friction), "{kick:?}");
+        assert_eq!(after.bounce_vel, before.bounce_vel, "{kick:?}");
+        assert_eq!(after.spin, before.spin, "{kick:?}");
+    }
 }
