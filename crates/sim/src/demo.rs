@@ -259,14 +259,21 @@ pub fn reachable(cal: &Calibration, ball: &SimBall) -> bool {
 /// (`strike.hit_depth_x`; the later of two) where that does. `None`: out
 /// of reach.
 pub fn meeting(cal: &Calibration, ball: &SimBall) -> Option<HitTruth> {
-    let planes = cal.strike.hitting_planes();
-    let home = planes.iter().position(|x| *x == cal.strike.hit_plane_x).unwrap_or(0);
-    let n = planes.len();
-    let order = std::iter::once(home).chain((1..n).flat_map(|d| [home + d, home.wrapping_sub(d)])).filter(|k| *k < n);
-    order
-        .filter_map(|k| ball.truth.crossing_at(&ball.physics, planes[k]).map(|h| (planes[k], h)))
-        .find(|(x, h)| cal.strike.in_window_at(*x, h.pos[1], h.pos[2]))
-        .map(|(_, h)| h)
+    meeting_among(cal, &crossings(cal, ball))
+}
+
+/// The ball's true crossing of each plane of the hitting volume (in the
+/// order of [`topspin_core::calib::StrikeCalib::hitting_planes`]).
+fn crossings(cal: &Calibration, ball: &SimBall) -> Vec<(f64, Option<HitTruth>)> {
+    cal.strike.hitting_planes().iter().map(|x| (*x, ball.truth.crossing_at(&ball.physics, *x))).collect()
+}
+
+/// [`meeting`] from the ball's [`crossings`].
+fn meeting_among(cal: &Calibration, crossings: &[(f64, Option<HitTruth>)]) -> Option<HitTruth> {
+    cal.strike.planes_outwards().find_map(|k| {
+        let (x, h) = crossings[k];
+        h.filter(|h| cal.strike.in_window_at(x, h.pos[1], h.pos[2]))
+    })
 }
 
 /// Balls out of the hitting window, by where they pass it.
@@ -625,17 +632,16 @@ pub(crate) fn judge_strokes(
 ) -> Vec<BallVerdict> {
     let robot = &cal.robot;
     let bat_path = BatPath::new(robot, path);
-    let planes = cal.strike.hitting_planes();
     let mut per_ball = Vec::new();
     for (k, ball) in balls.iter().enumerate() {
         let truth = &ball.truth;
         let true_spin = Vec3::new(truth.spin[0], truth.spin[1], truth.spin[2]);
-        let meet = meeting(cal, ball);
-        let reachable = meet.is_some();
         // The true crossings of the volume's planes; the plan's own plane
         // is where the bat and the ball are judged.
-        let crossings: Vec<(f64, HitTruth)> =
-            planes.iter().filter_map(|x| truth.crossing_at(&ball.physics, *x).map(|h| (*x, h))).collect();
+        let all = crossings(cal, ball);
+        let meet = meeting_among(cal, &all);
+        let reachable = meet.is_some();
+        let crossings: Vec<(f64, HitTruth)> = all.iter().filter_map(|(x, h)| h.map(|h| (*x, h))).collect();
         let Some(reference) = meet.or(truth.hit).or(crossings.first().map(|c| c.1)) else { continue };
         // The last plan whose hit is nearest the ball's true crossing of
         // the plan's own plane.

@@ -146,16 +146,33 @@ impl StrikeCalib {
     /// The hitting volume's planes, ascending: `hit_plane_x` and every
     /// [`HIT_DEPTH_STEP_M`] from it that lies within [`Self::depth`].
     pub fn hitting_planes(&self) -> heapless::Vec<f64, MAX_HITTING_PLANES> {
-        let [lo, hi] = self.depth();
-        let below = ((self.hit_plane_x - lo) / HIT_DEPTH_STEP_M + 1e-9).floor().max(0.0) as i64;
-        let above = ((hi - self.hit_plane_x) / HIT_DEPTH_STEP_M + 1e-9).floor().max(0.0) as i64;
+        let (below, above) = self.planes_around();
         let mut out = heapless::Vec::new();
-        for k in -below..=above {
+        for k in -(below as i64)..=above as i64 {
             if out.push(self.hit_plane_x + k as f64 * HIT_DEPTH_STEP_M).is_err() {
                 break;
             }
         }
         out
+    }
+
+    /// The index of `hit_plane_x` among [`Self::hitting_planes`].
+    pub fn nominal_plane(&self) -> usize {
+        self.planes_around().0.min(MAX_HITTING_PLANES - 1)
+    }
+
+    /// The indices of [`Self::hitting_planes`] outwards from the nominal
+    /// plane, the later (deeper) of two equally far first.
+    pub fn planes_outwards(&self) -> impl Iterator<Item = usize> {
+        let (home, n) = (self.nominal_plane(), self.hitting_planes().len());
+        std::iter::once(home).chain((1..n).flat_map(move |d| [home + d, home.wrapping_sub(d)])).filter(move |k| *k < n)
+    }
+
+    /// How many planes of the volume lie below and above the nominal one.
+    fn planes_around(&self) -> (usize, usize) {
+        let [lo, hi] = self.depth();
+        let count = |d: f64| (d / HIT_DEPTH_STEP_M + 1e-9).floor().max(0.0) as usize;
+        (count(self.hit_plane_x - lo), count(hi - self.hit_plane_x))
     }
 
     /// True when a hitting point at (y, z) on the plane x of the hitting
@@ -567,7 +584,8 @@ mod tests {
         for (x, want) in planes.iter().zip([1.45, 1.50, 1.55, 1.60]) {
             assert!((x - want).abs() < 1e-12, "{planes:?}");
         }
-        assert!(planes.contains(&c.strike.hit_plane_x));
+        assert_eq!(planes[c.strike.nominal_plane()], c.strike.hit_plane_x);
+        assert_eq!(c.strike.planes_outwards().collect::<Vec<_>>(), [3, 2, 1, 0]);
         let plane_only = StrikeCalib { hit_depth_x: None, ..c.strike.clone() };
         assert_eq!(plane_only.hitting_planes().as_slice(), &[c.strike.hit_plane_x]);
         let p = Path::new("strike.toml");

@@ -331,17 +331,19 @@ impl Estimator {
     /// An idle estimator for the cell `cal` (physics, table, strike) with
     /// settings `cfg`.
     pub fn new(cal: &Calibration, cfg: EstimatorConfig) -> Self {
+        let planes = cal.strike.hitting_planes();
+        let reach = match cal.strike.aim {
+            AimMode::Landing => planes.iter().map(|x| reach_map(cal, *x)).collect(),
+            AimMode::Paper => Vec::new(),
+        };
         Estimator {
             cfg,
             prop: cal.propagator(),
             strike: cal.strike.clone(),
             racket: cal.racket_model(),
             aim_bounds: aim::AimBounds::of(&cal.strike),
-            planes: cal.strike.hitting_planes(),
-            reach: match cal.strike.aim {
-                AimMode::Landing => cal.strike.hitting_planes().iter().map(|x| reach_map(cal, *x)).collect(),
-                AimMode::Paper => Vec::new(),
-            },
+            planes,
+            reach,
             candidate: HVec::new(),
             track: None,
             next_id: 1,
@@ -792,7 +794,7 @@ impl HittingVolume<'_> {
         nominal: &Prediction,
         last_x: Option<f64>,
     ) -> Result<(HitPoint, usize), Withheld> {
-        let home = self.planes.iter().position(|x| *x == self.strike.hit_plane_x).unwrap_or(0);
+        let home = self.strike.nominal_plane();
         let at_home = match nominal.hit {
             Some(hit) => stroke::check(self.strike, &hit, hit.t - t).map(|()| (hit, home)),
             None => Err(Withheld::NoHit),
@@ -836,10 +838,8 @@ impl HittingVolume<'_> {
         }
         // Outwards from the nominal plane (the later of two first): the
         // first of the largest margins.
-        let n = self.planes.len();
-        let order = std::iter::once(home).chain((1..n).flat_map(|d| [home + d, home.wrapping_sub(d)]));
         let mut best: Option<(HitPoint, usize, f64)> = None;
-        for k in order.filter(|k| *k < n) {
+        for k in self.strike.planes_outwards() {
             if let Ok(hit) = on(k)
                 && (last.is_none_or(|l| l == k) || hit.t - t >= PLANE_HOP_LEAD_S)
             {
