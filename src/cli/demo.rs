@@ -271,6 +271,14 @@ pub fn table(r: &DemoReport) -> String {
         },
         if fails.is_empty() { String::new() } else { format!("; not returned: {}", fails.join(", ")) }
     );
+    let [early, late] = r.timing_tolerance_ms_median;
+    if r.returns > 0 {
+        let _ = writeln!(
+            out,
+            "timing tolerance of the returns (median): the same strokes return the ball {early:.0} ms earlier to \
+             {late:.0} ms later"
+        );
+    }
     let _ = writeln!(
         out,
         "median spin error {:.1}%, median hit error {:.1} mm; RSI: {} cycles, {} late answers ({} later than a \

@@ -29,7 +29,7 @@ use crate::faults::{InjectedCounts, TrackerFaults, inject, plan_datagrams, send_
 use crate::launcher::Launch;
 use crate::mock_krc::{self, MockKrcConfig};
 use crate::render::{BallColour, Scene, Sequence, SequenceOptions, render_sequence};
-use crate::returns::{BatPath, ContactReport, ReturnFail, ReturnFails, judge_return};
+use crate::returns::{BatPath, ContactReport, ReturnFail, ReturnFails, judge_return, timing_window};
 use crate::stream::{capture_time, stream};
 use crate::truth::{Flight, HitTruth};
 use crate::{Redraws, SimBall, Strokes, TrackerModel, schedule};
@@ -158,6 +158,10 @@ pub struct BallVerdict {
     pub contact: Option<ContactReport>,
     /// Where the return first came down to the table's height (x, y), m.
     pub landing_xy: Option<[f64; 2]>,
+    /// The arrival shifts (ms, > 0: the ball later) over which the same
+    /// bat path returns the ball ([`timing_window`]): it holds 0 for a
+    /// returned ball, its ends are the stroke's timing tolerance.
+    pub timing_window_ms: Option<[f64; 2]>,
 }
 
 /// The demo's result.
@@ -189,6 +193,10 @@ pub struct DemoReport {
     pub rsi_cycles: u64,
     pub spin_err_pct_median: f64,
     pub hit_err_mm_median: f64,
+    /// How much earlier and later the returned balls could have come and
+    /// still been returned by the same strokes, ms (medians; each side
+    /// capped at [`crate::returns::TIMING_SPAN_MS`]).
+    pub timing_tolerance_ms_median: [f64; 2],
     pub latency_us: Latencies,
     pub ended_home: bool,
     /// Plans the RSI loop took that arrive late (and the worst, ms), and
@@ -564,6 +572,8 @@ fn judge(
     }
     let spin: Vec<f64> = reach.iter().filter_map(|b| b.spin_err_pct).collect();
     let hit_err: Vec<f64> = reach.iter().filter_map(|b| b.hit_err_mm).collect();
+    let windows: Vec<[f64; 2]> = reach.iter().filter(|b| b.returned).filter_map(|b| b.timing_window_ms).collect();
+    let tolerance = |side: fn(&[f64; 2]) -> f64| Summary::of(&windows.iter().map(side).collect::<Vec<_>>()).median;
     DemoReport {
         balls: balls.len(),
         reachable: reach.len(),
@@ -584,6 +594,7 @@ fn judge(
         rsi_cycles: mock.cycles,
         spin_err_pct_median: Summary::of(&spin).median,
         hit_err_mm_median: Summary::of(&hit_err).median,
+        timing_tolerance_ms_median: [tolerance(|w| -w[0]), tolerance(|w| w[1])],
         latency_us: Latencies::of(&summary.telemetry),
         ended_home: summary.ended_home,
         plans_late: summary.telemetry.plans_late,
@@ -667,6 +678,8 @@ pub(crate) fn judge_strokes(
         let true_hit = Vec3::new(hit.pos[0], hit.pos[1], hit.pos[2]);
         let tracking_err_mm = plan.and_then(|p| bat_path.at(p.hit_time).map(|b| (b.centre - p.position).norm() * 1e3));
         let ret = judge_return(cal, &ball.physics, &launch, launched, hit.t, &bat_path);
+        let timing_window_ms =
+            reachable.then(|| timing_window(cal, &ball.physics, &launch, launched, hit.t, &bat_path)).flatten();
         per_ball.push(BallVerdict {
             ball: k,
             setting: truth.setting.to_string(),
@@ -684,6 +697,7 @@ pub(crate) fn judge_strokes(
             return_why: ret.why,
             contact: ret.contact,
             landing_xy: ret.landing,
+            timing_window_ms,
         });
     }
     per_ball
@@ -720,7 +734,7 @@ fn closest_approach(
 
 /// Renders each ball's pass through the ceiling camera's strip (orange
 /// ball, the frames before the bounce).
-fn render_crops(cam: &CameraCalib, seed: u64, balls: &[SimBall]) -> Vec<Sequence> {
+pub(crate) fn render_crops(cam: &CameraCalib, seed: u64, balls: &[SimBall]) -> Vec<Sequence> {
     let scene = Scene::new(cam.clone(), BallColour::Orange);
     let opts = SequenceOptions { frames: topspin_core::logo::stream::SEQUENCE_LEN };
     let render = |b: &SimBall| render_sequence(&scene, &b.truth, &b.physics, seed, b.index, &opts);

@@ -339,25 +339,74 @@ fn returning_tilts(prop: &Propagator, racket: &RacketModel, ball: &BallState, ba
         let v_s = bat.surface_velocity(&(ball.pos - n * racket.radius));
         racket.hit(ball, &n, &v_s).is_some_and(|i| fly_return(prop, &i.after, t).0.is_none())
     };
-    let ok: Vec<bool> = (-60..=60).map(returns).collect();
+    let tilts: Vec<(f64, bool)> = (-60..=60).map(|deg| (deg as f64, returns(deg))).collect();
+    nearest_run(&tilts, actual)
+}
+
+/// How far the ball's arrival is shifted at most when a stroke's timing
+/// window is measured, ms (either way).
+pub const TIMING_SPAN_MS: i64 = 30;
+
+/// The stroke's timing window: the run of whole-millisecond shifts of the
+/// ball's arrival (ms, > 0: the ball later, as if the bat were early)
+/// within ±[`TIMING_SPAN_MS`] over which the same bat path still returns
+/// the ball — the run nearest no shift (so it holds 0 for a returned
+/// ball, and its ends are the stroke's tolerance either way). `None`: no
+/// shift returns it.
+pub fn timing_window(
+    cal: &Calibration,
+    prop: &Propagator,
+    launch: &Launch,
+    start: Instant,
+    t_hit: f64,
+    path: &BatPath,
+) -> Option<[f64; 2]> {
+    let racket = cal.racket_model();
+    let returns = |shift_ms: i64| {
+        let shifted = Instant(start.0.saturating_add_signed(shift_ms * 1_000_000));
+        return_fail(&racket, prop, launch, shifted, t_hit, path).is_ok_and(|f| f.is_none())
+    };
+    let shifts: Vec<(f64, bool)> = (-TIMING_SPAN_MS..=TIMING_SPAN_MS).map(|k| (k as f64, returns(k))).collect();
+    nearest_run(&shifts, 0.0)
+}
+
+/// Of the runs of consecutive `true` values in `points` (ascending by
+/// their first), the one nearest `at`, as its first and last value.
+fn nearest_run(points: &[(f64, bool)], at: f64) -> Option<[f64; 2]> {
     let mut best: Option<[f64; 2]> = None;
     let mut k = 0;
-    while k < ok.len() {
-        if !ok[k] {
+    while k < points.len() {
+        if !points[k].1 {
             k += 1;
             continue;
         }
-        let start = k;
-        while k < ok.len() && ok[k] {
+        let first = k;
+        while k < points.len() && points[k].1 {
             k += 1;
         }
-        let run = [start as f64 - 60.0, (k - 1) as f64 - 60.0];
-        let dist = |r: &[f64; 2]| (r[0] - actual).max(actual - r[1]).max(0.0);
+        let run = [points[first].0, points[k - 1].0];
+        let dist = |r: &[f64; 2]| (r[0] - at).max(at - r[1]).max(0.0);
         if best.is_none_or(|b| dist(&run) < dist(&b)) {
             best = Some(run);
         }
     }
     best
+}
+
+/// The touch and where its return goes, without the reasons: `Err` when
+/// the face never met the ball, `Ok(None)` when it was returned.
+fn return_fail(
+    racket: &RacketModel,
+    prop: &Propagator,
+    launch: &Launch,
+    start: Instant,
+    t_hit: f64,
+    path: &BatPath,
+) -> Result<Option<ReturnFail>, ()> {
+    let flight = Flight::new(launch, prop);
+    let touch = find_touch(&flight, start, t_hit, path, racket.radius, racket.params.bat_radius).map_err(|_| ())?;
+    let impact = racket.hit_bat(&touch.ball, &touch.bat).ok_or(())?;
+    Ok(fly_return(prop, &impact.after, touch.t).0)
 }
 
 /// Judges the return of one ball: `launch` at `start` flying the physics
