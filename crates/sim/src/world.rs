@@ -9,22 +9,27 @@
 //! of its configuration and seed.
 //!
 //! What it leaves out of the daemon: the threads' own processing time (the
-//! estimator's plan is ready when its observation arrives; the benches
-//! measure that time) and the telemetry thread.
+//! estimator's plan is ready when its observation arrives, the logo's spin
+//! when its last crop does; the benches measure those times) and the
+//! telemetry thread.
 
 use std::net::{IpAddr, Ipv4Addr, SocketAddr};
 
-use crate::demo::{BallVerdict, DemoConfig, LEAD_IN, demo_daemon_config, judge_strokes};
+use crate::demo::{BallVerdict, DemoConfig, LEAD_IN, demo_daemon_config, judge_strokes, render_crops};
 use crate::faults::{InjectedCounts, Sender, inject, plan_datagrams};
 use crate::mock_krc::pair::Pair;
 use crate::mock_krc::{Faults, MockKrcConfig, MockResult};
+use crate::render::Sequence;
+use crate::stream::capture_time;
 use crate::{SimBall, schedule, simulate_in};
 use topspin_core::calib::Calibration;
-use topspin_core::estimator::Estimator;
+use topspin_core::estimator::{Estimator, EstimatorEvent};
 use topspin_core::ingest::{Ingest, IngestCounters};
+use topspin_core::logo::stream::{LogoCounters, LogoStream};
 use topspin_core::plan::StrikePlan;
 use topspin_core::rsi::session::{RsiSession, SessionConfig, SessionStats};
 use topspin_core::time::{Duration, Instant};
+use topspin_core::wire::crop::Crop;
 
 /// Where the virtual tracker's datagrams come from.
 const TRACKER: SocketAddr = SocketAddr::new(IpAddr::V4(Ipv4Addr::new(127, 0, 0, 1)), 40_001);
@@ -52,6 +57,11 @@ pub struct VirtualRun {
     pub last_plans: Vec<StrikePlan>,
     /// What the tracker-side fault injector did, if it ran.
     pub injected: Option<InjectedCounts>,
+    /// The logo stream's counters (with `runtime.logo`), and the logo
+    /// spins the estimator fused and refused at its gate.
+    pub logo: Option<LogoCounters>,
+    pub logo_spins_fused: u64,
+    pub logo_spins_gated: u64,
     /// Every stroke judged on the truth.
     pub per_ball: Vec<BallVerdict>,
 }
@@ -70,7 +80,11 @@ impl VirtualRun {
 
 /// Runs `cfg.balls` balls through the cell on the virtual clock until the
 /// last stroke is done and the bat is home (`cfg.tracker_faults` applied;
-/// the live view, recording and logo thread of `cfg` are not part of it).
+/// the live view and recording of `cfg` are not part of it).
+///
+/// # Panics
+///
+/// If `runtime.logo` names a CNN whose model does not load.
 pub fn run_virtual(cfg: &DemoConfig, cal: &Calibration) -> VirtualRun {
     let (balls, _) = simulate_in(cfg.world.as_ref(), cfg.strokes, cal, cfg.seed, cfg.balls, &cfg.tracker);
     let ends: Vec<f64> = balls.iter().map(|b| b.truth.end_t).collect();
@@ -106,13 +120,39 @@ pub fn run_virtual(cfg: &DemoConfig, cal: &Calibration) -> VirtualRun {
 
     let last_end = starts.last().copied().unwrap_or(0.0) + ends.last().copied().unwrap_or(0.0);
     let end = t0 + Duration::from_nanos(((last_end + cfg.tail_s).max(0.0) * 1e9) as u64);
+    let mut camera = cfg.runtime.logo.as_ref().map(|l| {
+        let latency = Duration::from_nanos((cfg.tracker.latency * 1e9) as u64);
+        let method = l.method.load().expect("the logo method loads");
+        Camera::new(
+            render_crops(&l.camera, cfg.seed, &balls),
+            &starts,
+            t0,
+            latency,
+            LogoStream::new(l.camera.clone(), method),
+        )
+    });
+    let (mut logo_spins_fused, mut logo_spins_gated) = (0, 0);
     let mut last_plans: Vec<StrikePlan> = Vec::new();
     let mut next = 0;
     while pair.now() < end {
         // Everything that reaches the daemon before this cycle's request
-        // does: its plan is in the slot when the session takes it.
+        // does: its plan is in the slot when the session takes it. Crops
+        // and datagrams in the order they arrive.
         let request_arrives = pair.now() + pair.timing.request_latency;
-        while let Some(d) = datagrams.get(next).filter(|d| d.at <= request_arrives) {
+        loop {
+            let tracker_at = datagrams.get(next).map(|d| d.at).filter(|t| *t <= request_arrives);
+            let crop_at = camera.as_ref().and_then(Camera::next_arrival).filter(|t| *t <= request_arrives);
+            if let (Some(c), Some(cam)) = (crop_at, camera.as_mut())
+                && tracker_at.is_none_or(|t| c < t)
+            {
+                if let Some(spin) = cam.deliver_next()
+                    && let Some(EstimatorEvent::LogoSpin { accepted, .. }) = estimator.observe_logo_spin(&spin)
+                {
+                    *(if accepted { &mut logo_spins_fused } else { &mut logo_spins_gated }) += 1;
+                }
+                continue;
+            }
+            let Some(d) = tracker_at.and(datagrams.get(next)) else { break };
             next += 1;
             let from = match d.from {
                 Sender::Tracker => TRACKER,
@@ -126,6 +166,12 @@ pub fn run_virtual(cfg: &DemoConfig, cal: &Calibration) -> VirtualRun {
                     _ => last_plans.push(plan),
                 }
             }
+        }
+        // A sequence gone quiet ends (the logo thread's receive timeout).
+        if let Some(spin) = camera.as_mut().and_then(|c| c.stream.poll(request_arrives))
+            && let Some(EstimatorEvent::LogoSpin { accepted, .. }) = estimator.observe_logo_spin(&spin)
+        {
+            *(if accepted { &mut logo_spins_fused } else { &mut logo_spins_gated }) += 1;
         }
         if pair.step().is_none() {
             break; // RSI stopped: the controller would need a restart
@@ -142,6 +188,59 @@ pub fn run_virtual(cfg: &DemoConfig, cal: &Calibration) -> VirtualRun {
         ingest: ingest.counters(),
         last_plans,
         injected,
+        logo: camera.map(|c| c.stream.counters()),
+        logo_spins_fused,
+        logo_spins_gated,
         per_ball,
+    }
+}
+
+/// The ceiling camera on the virtual clock: every rendered crop with the
+/// time it reaches the logo stream, in that order.
+struct Camera {
+    sequences: Vec<Sequence>,
+    /// (arrival, capture, sequence, frame), by arrival.
+    crops: Vec<(Instant, Instant, usize, usize)>,
+    next: usize,
+    stream: LogoStream,
+}
+
+impl Camera {
+    fn new(sequences: Vec<Sequence>, starts: &[f64], t0: Instant, latency: Duration, stream: LogoStream) -> Self {
+        let mut crops: Vec<_> = sequences
+            .iter()
+            .zip(starts)
+            .enumerate()
+            .flat_map(|(k, (s, &start))| {
+                s.frames.iter().enumerate().map(move |(i, f)| {
+                    let capture = capture_time(t0, start, f.label.t);
+                    (capture + latency, capture, k, i)
+                })
+            })
+            .collect();
+        crops.sort_by_key(|c| c.0.0);
+        Camera { sequences, crops, next: 0, stream }
+    }
+
+    fn next_arrival(&self) -> Option<Instant> {
+        self.crops.get(self.next).map(|c| c.0)
+    }
+
+    /// The next crop into the logo stream, and the spin it completes.
+    fn deliver_next(&mut self) -> Option<topspin_core::estimator::LogoSpin> {
+        let (_, capture, k, i) = *self.crops.get(self.next)?;
+        self.next += 1;
+        let f = &self.sequences[k].frames[i];
+        let m = f.label.measured;
+        self.stream.crop(&Crop {
+            seq: self.next as u32,
+            capture,
+            u: m.u as f32,
+            v: m.v as f32,
+            radius: m.radius as f32,
+            width: f.crop.width as u16,
+            height: f.crop.height as u16,
+            pixels: &f.crop.rgb,
+        })
     }
 }

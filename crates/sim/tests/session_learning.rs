@@ -7,7 +7,8 @@
 
 use topspin_core::calib::Calibration;
 use topspin_core::estimator::session::LearnConfig;
-use topspin_core::estimator::{EndReason, Estimator, EstimatorConfig, EstimatorEvent};
+use topspin_core::estimator::{EndReason, Estimator, EstimatorConfig, EstimatorEvent, LogoSpin};
+use topspin_core::physics::Vec3;
 use topspin_core::plan::StrikePlan;
 use topspin_core::time::Instant;
 use topspin_sim::worlds::{World, simulate_world_ball, world_named};
@@ -272,4 +273,44 @@ fn a_bounce_nothing_explains_is_counted_and_teaches_nothing() {
         assert_eq!(after.bounce_vel, before.bounce_vel, "{kick:?}");
         assert_eq!(after.spin, before.spin, "{kick:?}");
     }
+}
+
+#[test]
+fn the_cameras_spin_gives_the_ball_its_size_and_teaches_the_session() {
+    // Fast topspin in air whose lift saturates: the flight reads the spin
+    // low and the bounce cannot correct it (the contact slides). The
+    // ceiling camera's spin, fused 0.1 s before the bounce, sets the size
+    // of the spin the stroke answers; the session keeps it for the next
+    // balls of that flight.
+    let cal = Calibration::default_cell();
+    let world = world_named(&cal, "real-launcher").unwrap();
+    let (balls, launches) = session(&world, &cal, 27);
+    let k = balls.iter().position(|b| b.truth.setting.to_string() == "topspin-high").expect("a fast topspin ball");
+    let (ball, t0) = (&balls[k], launches[k]);
+    let truth = Vec3::from(ball.truth.spin);
+    let tb = ball.truth.bounce.expect("it bounces").t;
+    let last_plan = |logo: bool| {
+        let mut est = Estimator::new(&cal, config(LearnConfig::default()));
+        let count = est.session().spin.count;
+        let (mut plan, mut fused) = (None, None);
+        for o in &ball.observations {
+            if logo && fused.is_none() && o.t > tb - 0.1 {
+                let m = LogoSpin {
+                    last_crop: Instant::from_secs_f64(t0 + o.t),
+                    spin: truth,
+                    cov: nalgebra::Matrix3::identity() * 4.0,
+                };
+                fused = est.observe_logo_spin(&m);
+            }
+            plan = est.observe(Instant::from_secs_f64(t0 + o.t), o.pos).plan.or(plan);
+        }
+        (plan.expect("a plan").spin, fused, est.session().spin.count - count)
+    };
+    let (flown, _, _) = last_plan(false);
+    let (seen, fused, taught) = last_plan(true);
+    assert!(matches!(fused, Some(EstimatorEvent::LogoSpin { accepted: true, .. })), "{fused:?}");
+    let off = |w: Vec3| (w.norm() / truth.norm() - 1.0).abs();
+    assert!(off(flown) > 0.25, "the flight alone: {flown} against {truth}");
+    assert!(off(seen) < 0.10, "with the camera: {seen} against {truth}");
+    assert!(taught >= 1, "the session kept the reading");
 }

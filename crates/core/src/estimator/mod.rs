@@ -283,6 +283,29 @@ struct Track {
     smoothed: bool,
     /// The plane of the hitting volume the last plan met the ball on.
     hit_x: Option<f64>,
+    /// The spin the ceiling camera read (rad/s, table frame) and the σ of
+    /// the ln of its scale against the flight's reading, once fused.
+    logo: Option<(Vec3, f64)>,
+}
+
+/// A logo spin more than this far from the flight's own spin direction is
+/// not taken as a measure of the flight's scale, rad (45°).
+const LOGO_MAX_ANGLE_RAD: f64 = std::f64::consts::FRAC_PI_4;
+/// Least σ of the ln of a logo spin's scale: the rotation fit's
+/// covariance leaves out what the logo's detection gets wrong.
+pub const LOGO_SCALE_SIGMA_FLOOR: f64 = 0.05;
+
+/// The spin the camera read (`logo`) per unit of the flight's reading
+/// (`flight`): the least-squares scale along the flight's spin, within
+/// the spin prior's grid (×0.5–4); `None` where the flight shows no spin
+/// or the two point more than [`LOGO_MAX_ANGLE_RAD`] apart.
+fn logo_scale(logo: &Vec3, flight: &Vec3) -> Option<f64> {
+    let (l, f) = (logo.norm(), flight.norm());
+    let dot = logo.dot(flight);
+    if !(f > 1.0 && l > 1.0 && dot >= l * f * LOGO_MAX_ANGLE_RAD.cos()) {
+        return None;
+    }
+    Some((dot / (f * f)).clamp(0.5, 4.0))
 }
 
 /// The estimator: at most one ball tracked at a time (the one coming at
@@ -453,10 +476,32 @@ impl Estimator {
         if track.spin_before_bounce.is_some() || t < started - self.cfg.silence || t > track.last_t + self.cfg.silence {
             return None;
         }
-        let (accepted, d2) = match track.ekf.update_spin(&m.spin, &m.cov) {
+        // The filter's spin is the flight's reading of it, through the
+        // calibration's lift: the camera's spin is brought to that reading
+        // by the scale between them, which carries its size; the filter
+        // takes its direction (its gate checks that), the table and the
+        // stroke its size.
+        let flight = track.ekf.state();
+        let scale = logo_scale(&m.spin, &flight.spin);
+        let (z, r) = match scale {
+            Some(k) => (m.spin / k, m.cov / (k * k)),
+            None => (m.spin, m.cov),
+        };
+        let (accepted, d2) = match track.ekf.update_spin(&z, &r) {
             Update::Accepted { d2 } => (true, d2),
             Update::Rejected { d2 } => (false, d2),
         };
+        if accepted && let Some(k) = scale {
+            let along = flight.spin.normalize();
+            let sigma =
+                ((along.transpose() * m.cov * along)[0].max(0.0).sqrt() / m.spin.norm()).max(LOGO_SCALE_SIGMA_FLOOR);
+            track.logo = Some((m.spin, sigma));
+            track.prop.bounce = track.prop.bounce.with_spin_scale(k);
+            track.ekf.noise.bounce_spin_share = sigma;
+            if self.cfg.learn.enabled && self.cfg.learn.spin {
+                self.session.spin.take_logo(&flight, k, sigma, &self.prop.bounce);
+            }
+        }
         Some(EstimatorEvent::LogoSpin { trajectory: track.id, t: track.last_t, accepted, d2 })
     }
 
@@ -557,6 +602,7 @@ impl Estimator {
             batch_from: 0,
             smoothed: false,
             hit_x: None,
+            logo: None,
         });
         out.push(EstimatorEvent::Started { trajectory: id, t: last.t, start_outliers: outliers.len() as u8 });
         self.plan(last.t, out);
@@ -568,11 +614,20 @@ impl Estimator {
         if sample.t <= track.ekf.t {
             return; // out of order or duplicate
         }
-        if track.spin_before_bounce.is_none() && cfg.learn.enabled && cfg.learn.spin {
-            // The spin the table will meet, for the flight shown so far.
-            let s = spin_prior::spin_parameter(&track.ekf.state(), self.prop.bounce.radius);
-            track.prop.bounce = track.prop.bounce.with_spin_scale(self.session.spin.scale_at(s));
-            track.ekf.noise.bounce_spin_share = self.session.spin.share_at(s);
+        if track.spin_before_bounce.is_none() {
+            // The spin the table will meet, for the flight shown so far:
+            // as the camera read it, else as the session learned it.
+            let state = track.ekf.state();
+            if let Some((logo, sigma)) = track.logo
+                && let Some(k) = logo_scale(&logo, &state.spin)
+            {
+                track.prop.bounce = track.prop.bounce.with_spin_scale(k);
+                track.ekf.noise.bounce_spin_share = sigma;
+            } else if cfg.learn.enabled && cfg.learn.spin {
+                let s = spin_prior::spin_parameter(&state, self.prop.bounce.radius);
+                track.prop.bounce = track.prop.bounce.with_spin_scale(self.session.spin.scale_at(s));
+                track.ekf.noise.bounce_spin_share = self.session.spin.share_at(s);
+            }
         }
         let mut trial = track.ekf;
         if let Some(tb) = trial.predict(&track.prop, sample.t) {

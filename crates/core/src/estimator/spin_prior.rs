@@ -13,7 +13,10 @@
 //! and every larger scale explains them as well), the bin takes the
 //! middle of what fits: a kick cannot exceed the sliding one, so a scale
 //! a little high costs little, and one too low makes the ball early.
-//! Fixed memory ([`BIN_MEMORY`] bounces a bin), bounded work.
+//! A ball whose spin the ceiling camera read ([`SpinPrior::take_logo`])
+//! tells its scale directly, with the logo's own uncertainty: it is kept
+//! and weighed beside the bounces, fast spins included (whose contacts
+//! slide). Fixed memory ([`BIN_MEMORY`] readings a bin), bounded work.
 
 use crate::physics::{BallState, BounceModel, Vec3};
 
@@ -51,21 +54,28 @@ fn grid(k: usize) -> f64 {
     0.5 * 2f64.powf(k as f64 / 8.0)
 }
 
-/// One bounce a bin keeps: the state at the contact as the flight showed
-/// it, the velocity seen just after it, and that velocity's variance.
+/// One reading a bin keeps.
 #[derive(Copy, Clone, Debug, PartialEq)]
-struct Seen {
-    before: BallState,
-    after: Vec3,
-    var: Vec3,
+enum Seen {
+    /// A bounce: the state at the contact as the flight showed it, the
+    /// velocity seen just after it, and that velocity's variance.
+    Bounce { before: BallState, after: Vec3, var: Vec3 },
+    /// A ball whose spin the ceiling camera read: its scale, as ln, and
+    /// that reading's σ.
+    Logo { ln_scale: f64, sigma: f64 },
 }
 
 impl Seen {
-    /// Normalised squared residual of the tangential velocity after the
-    /// bounce under `table` with scale `m`.
+    /// Normalised squared residual of scale `m`: of the tangential
+    /// velocity after the bounce under `table`, or of the logo's scale.
     fn cost(&self, table: &BounceModel, m: f64) -> f64 {
-        let v = table.with_spin_scale(m).apply(&self.before).vel;
-        (0..2).map(|k| (v[k] - self.after[k]).powi(2) / self.var[k].max(1e-6)).sum()
+        match self {
+            Seen::Bounce { before, after, var } => {
+                let v = table.with_spin_scale(m).apply(before).vel;
+                (0..2).map(|k| (v[k] - after[k]).powi(2) / var[k].max(1e-6)).sum()
+            }
+            Seen::Logo { ln_scale, sigma } => ((m.ln() - ln_scale) / sigma).powi(2),
+        }
     }
 
     fn costs(&self, table: &BounceModel) -> [f64; SCALE_GRID] {
@@ -95,7 +105,8 @@ struct Bin {
 #[derive(Copy, Clone, Debug, PartialEq)]
 pub struct SpinPrior {
     bins: [Bin; SPIN_BINS],
-    /// Bounces taken in (that told something about the spin).
+    /// Bounces and logo readings taken in (that told something about the
+    /// spin).
     pub count: u32,
 }
 
@@ -153,7 +164,7 @@ impl SpinPrior {
     /// own uncertainty through the contact (not the bin's spread), so that
     /// what fits one kick is what the reading and the tracker leave open.
     pub fn take(&mut self, before: &BallState, after: &Vec3, var: &Vec3, table: &BounceModel) -> bool {
-        let seen = Seen { before: *before, after: *after, var: *var };
+        let seen = Seen::Bounce { before: *before, after: *after, var: *var };
         let table = table.with_spin_scale(1.0);
         if table.radius * before.spin.x.hypot(before.spin.y) < MIN_SURFACE_SPEED {
             return false;
@@ -163,14 +174,35 @@ impl SpinPrior {
         if fitting(&seen.costs(&table)).0 == 0 {
             return false;
         }
-        let s = spin_parameter(before, table.radius);
+        self.keep(seen, spin_parameter(before, table.radius), &table);
+        true
+    }
+
+    /// Takes one ball whose spin the ceiling camera read: `flight` its
+    /// state as the flight showed it, `scale` the logo's spin per unit of
+    /// the flight's (its σ in ln: `sigma`), `table` the session's table.
+    /// Kept in the bin of the flight's spin parameter, as a bounce is;
+    /// false (nothing kept) for a scale off the grid or not finite.
+    pub fn take_logo(&mut self, flight: &BallState, scale: f64, sigma: f64, table: &BounceModel) -> bool {
+        let usable = scale.is_finite() && sigma.is_finite() && sigma > 0.0;
+        if !(usable && (grid(0)..=grid(SCALE_GRID - 1)).contains(&scale)) {
+            return false;
+        }
+        let table = table.with_spin_scale(1.0);
+        self.keep(Seen::Logo { ln_scale: scale.ln(), sigma }, spin_parameter(flight, table.radius), &table);
+        true
+    }
+
+    /// Keeps `seen` in the bin nearest spin parameter `s` and finds that
+    /// bin's scale and spread anew.
+    fn keep(&mut self, seen: Seen, s: f64, table: &BounceModel) {
         let c = &SPIN_BIN_CENTRES;
         let k = (0..SPIN_BINS).min_by(|&a, &b| (c[a] - s).abs().total_cmp(&(c[b] - s).abs())).expect("bins");
         let bin = &mut self.bins[k];
         bin.seen[bin.next] = Some(seen);
         bin.next = (bin.next + 1) % BIN_MEMORY;
         // Each kept bounce's costs, once.
-        let costs: [Option<[f64; SCALE_GRID]>; BIN_MEMORY] = bin.seen.map(|seen| seen.map(|s| s.costs(&table)));
+        let costs: [Option<[f64; SCALE_GRID]>; BIN_MEMORY] = bin.seen.map(|seen| seen.map(|s| s.costs(table)));
         let mut total: [f64; SCALE_GRID] = std::array::from_fn(|k| (grid(k).ln() / PRIOR_SIGMA).powi(2));
         for c in costs.iter().flatten() {
             for (t, c) in total.iter_mut().zip(c) {
@@ -198,7 +230,6 @@ impl SpinPrior {
             bin.share = (sum / n as f64).max(0.0).sqrt().clamp(SHARE_BOUNDS.0, SHARE_BOUNDS.1);
         }
         self.count = self.count.saturating_add(1);
-        true
     }
 }
 
@@ -269,5 +300,28 @@ mod tests {
         let wild = table.apply(&shown(200.0)).vel + Vec3::new(-1.5, 0.8, 0.0);
         prior.take(&shown(100.0), &wild, &var, &table);
         assert!((prior.scales()[2] - good).abs() < 0.1 * good, "{good} → {:?}", prior.scales());
+    }
+
+    /// The camera read each ball's spin at twice what its flight showed:
+    /// the bin learns ×2 from the readings alone, fast spins included
+    /// (whose contacts slide and teach the table nothing); a reading off
+    /// the grid, or without a finite σ, is refused.
+    #[test]
+    fn the_logo_tells_the_scale_directly() {
+        let table = BounceModel::new(0.92, 0.2, R);
+        let mut prior = SpinPrior::default();
+        for k in 0..8 {
+            assert!(prior.take_logo(&shown(250.0 + k as f64), 2.0, 0.05, &table));
+        }
+        // S shown: 0.02·250/5.83 = 0.86, the bin at 0.8.
+        let s = prior.scales();
+        assert!((s[3] - 2.0).abs() < 0.1, "{s:?}");
+        assert_eq!((s[0], s[1], s[2]), (1.0, 1.0, 1.0));
+        assert!(prior.shares()[3] <= 0.1, "{:?}", prior.shares());
+        assert_eq!(prior.count, 8);
+        for (scale, sigma) in [(8.0, 0.05), (0.2, 0.05), (f64::NAN, 0.05), (2.0, 0.0), (2.0, f64::INFINITY)] {
+            assert!(!prior.take_logo(&shown(250.0), scale, sigma, &table), "{scale} {sigma}");
+        }
+        assert_eq!(prior.count, 8);
     }
 }

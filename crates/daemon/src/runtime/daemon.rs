@@ -120,6 +120,19 @@ pub enum LogoMethodChoice {
     Background,
 }
 
+impl LogoMethodChoice {
+    /// The logo stream's method: the CNN loaded from its model (the
+    /// reason when it does not load), or background subtraction.
+    pub fn load(&self) -> Result<Method, String> {
+        Ok(match self {
+            LogoMethodChoice::Cnn { model, backend } => {
+                Method::Cnn(Box::new(LogoCnn::load(model, backend).map_err(|e| e.to_string())?))
+            }
+            LogoMethodChoice::Background => Method::Background(LogoMethod::Segment),
+        })
+    }
+}
+
 impl RuntimeConfig {
     /// Everything on loopback with ephemeral ports, no pinning, SCHED_FIFO
     /// for the hot threads where permitted (else warnings and normal
@@ -305,13 +318,7 @@ impl Daemon {
             Some(l) => {
                 let socket = UdpSocket::bind(l.bind)?;
                 socket.set_read_timeout(Some(LOGO_POLL))?;
-                let method = match &l.method {
-                    LogoMethodChoice::Cnn { model, backend } => Method::Cnn(Box::new(
-                        LogoCnn::load(model, backend)
-                            .map_err(|e| io::Error::new(io::ErrorKind::InvalidInput, e.to_string()))?,
-                    )),
-                    LogoMethodChoice::Background => Method::Background(LogoMethod::Segment),
-                };
+                let method = l.method.load().map_err(|e| io::Error::new(io::ErrorKind::InvalidInput, e))?;
                 Some((socket, LogoStream::new(l.camera.clone(), method), l.source, l.thread))
             }
             None => None,
