@@ -130,18 +130,35 @@ fn every_tracker_fault_at_once_is_survived_and_counted_exactly() {
 
 /// The measurement behind the README's virtual-cell numbers (not a check):
 /// `SEEDS=1,2,3,4,5,7 BALLS=27 [CORRECTION=axis] [WORLD=real-launcher]
-/// [STROKES=human-rally] [LOGO=background|cnn] cargo test --release --test virtual_cell --
+/// [STROKES=human-rally] [LOGO=background|cnn] [AIM_TARGET=x,y]
+/// [AIM_PATTERN=x,y;x,y] [AIM_AWAY=1] cargo test --release --test virtual_cell --
 /// --ignored --nocapture` (`WORLD`: a world of `topspin eval worlds`,
 /// default the calibration's own physics; `STROKES`: the balls' source,
 /// default the cell's launcher; `LOGO`: the ceiling camera's spin fused,
-/// found by background subtraction or the CNN) prints every ball not returned (or
+/// found by background subtraction or the CNN; `AIM_…`: where the returns
+/// are aimed, `strike.aim_target`, a pattern, or away from the opponent)
+/// prints every ball not returned (or
 /// missed) with the judge's reason and the totals over the seeds: over
 /// the reachable balls, and over all balls (every ball of a run bounces
 /// on the robot's half).
 #[test]
 #[ignore = "a measurement: run it by name"]
 fn returns_over_seeds() {
-    let cal = Calibration::default_cell();
+    let mut cal = Calibration::default_cell();
+    let pair = |s: &str| -> [f64; 2] {
+        let v: Vec<f64> = s.split(',').map(|v| v.trim().parse().expect("a target: x,y")).collect();
+        [v[0], v[1]]
+    };
+    if let Ok(t) = std::env::var("AIM_TARGET") {
+        cal.strike.aim_target = pair(&t);
+    }
+    if let Ok(p) = std::env::var("AIM_PATTERN") {
+        cal.strike.aim_pattern = p.split(';').map(pair).collect();
+        cal.strike.aim_strategy = topspin_core::calib::AimStrategy::Pattern;
+    }
+    if std::env::var("AIM_AWAY").is_ok() {
+        cal.strike.aim_strategy = topspin_core::calib::AimStrategy::Away;
+    }
     let seeds: Vec<u64> = std::env::var("SEEDS")
         .unwrap_or_else(|_| "1,2,3,4,5,7".into())
         .split(',')

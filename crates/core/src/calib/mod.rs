@@ -93,6 +93,12 @@ pub struct StrikeCalib {
     /// Where returns are aimed (x, y in T, on the opponent's half), m.
     #[serde(default = "default_aim_target")]
     pub aim_target: [f64; 2],
+    /// How each ball's target is chosen ([`AimStrategy`]).
+    #[serde(default)]
+    pub aim_strategy: AimStrategy,
+    /// The targets `pattern` cycles through, ball by ball (x, y in T), m.
+    #[serde(default)]
+    pub aim_pattern: Vec<[f64; 2]>,
     /// The face's tilt range the aim may use, degrees: most closed (< 0),
     /// most open (> 0).
     #[serde(default = "default_aim_tilt")]
@@ -113,6 +119,42 @@ pub enum AimMode {
     Landing,
     /// The paper's rule: β linear in ω_y, A and C linear in y.
     Paper,
+}
+
+/// How each ball's return target is chosen (`strike.aim_strategy`).
+#[derive(Copy, Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum AimStrategy {
+    /// Every ball to `aim_target`.
+    #[default]
+    Point,
+    /// Ball after ball through `aim_pattern`.
+    Pattern,
+    /// Away from the opponent: at `aim_target`'s depth, `aim_target`'s
+    /// width from the middle on the side of the table the ball did not
+    /// come from (the opponent stands behind where it was first seen).
+    Away,
+}
+
+/// Most targets `strike.aim_pattern` may hold.
+pub const MAX_AIM_PATTERN: usize = 16;
+
+impl StrikeCalib {
+    /// The target for ball number `ball` of the session, first seen at
+    /// `first_y` (y in T, m).
+    pub fn aim_target_for(&self, ball: u32, first_y: f64) -> [f64; 2] {
+        match self.aim_strategy {
+            AimStrategy::Point => self.aim_target,
+            AimStrategy::Pattern if !self.aim_pattern.is_empty() => {
+                self.aim_pattern[ball as usize % self.aim_pattern.len()]
+            }
+            AimStrategy::Pattern => self.aim_target,
+            AimStrategy::Away => {
+                let side = if first_y > 0.0 { -1.0 } else { 1.0 };
+                [self.aim_target[0], side * self.aim_target[1].abs()]
+            }
+        }
+    }
 }
 
 /// The middle of the opponent's half.
@@ -435,6 +477,24 @@ impl Calibration {
                 return Err(CalibError::OutOfRange { path, key, value });
             }
         }
+        let on_their_half =
+            |t: &[f64; 2]| t[0] < 0.0 && t[0] > table.opponent_end_x() && t[1].abs() < table.width / 2.0;
+        let pattern_ok = match s.aim_strategy {
+            AimStrategy::Pattern => !s.aim_pattern.is_empty() && s.aim_pattern.len() <= MAX_AIM_PATTERN,
+            _ => s.aim_pattern.len() <= MAX_AIM_PATTERN,
+        };
+        if !pattern_ok {
+            let key = "strike.aim_pattern (1 to 16 targets for aim_strategy = \"pattern\")";
+            return Err(CalibError::OutOfRange { path, key, value: s.aim_pattern.len() as f64 });
+        }
+        if let Some(t) = s.aim_pattern.iter().find(|t| !on_their_half(t)) {
+            let key = "strike.aim_pattern (on the opponent's half)";
+            return Err(CalibError::OutOfRange { path, key, value: if t[0] < 0.0 { t[1] } else { t[0] } });
+        }
+        if s.aim_strategy == AimStrategy::Away && s.aim_target[1].abs() < 0.05 {
+            let key = "strike.aim_target (aim_strategy = \"away\" needs a width: |y| ≥ 0.05)";
+            return Err(CalibError::OutOfRange { path, key, value: s.aim_target[1] });
+        }
         let (text, path) = (robot.0, robot.1.to_owned());
         let robot = parse::<RobotFile>(text, &path)?;
         robot.validate().map_err(|b| CalibError::OutOfRange { path: path.clone(), key: b.key, value: b.value })?;
@@ -623,6 +683,41 @@ mod tests {
         let bad = DEFAULT_STRIKE.replace("aim_target = [-0.70, 0.0]", "aim_target = [0.70, 0.0]");
         let e = Calibration::from_texts((DEFAULT_PHYSICS, p), (DEFAULT_TABLE, p), (&bad, p), (DEFAULT_ROBOT, p));
         assert!(e.unwrap_err().to_string().contains("strike.aim_target"));
+    }
+
+    #[test]
+    fn each_ball_is_aimed_as_the_strategy_says_and_bad_strategies_are_named() {
+        let p = Path::new("strike.toml");
+        let with = |lines: &str| {
+            let text = DEFAULT_STRIKE.replace("aim_strategy = \"point\"", lines);
+            Calibration::from_texts((DEFAULT_PHYSICS, p), (DEFAULT_TABLE, p), (&text, p), (DEFAULT_ROBOT, p))
+        };
+        let point = Calibration::default_cell().strike;
+        assert_eq!(point.aim_strategy, AimStrategy::Point);
+        assert_eq!((point.aim_target_for(0, 0.3), point.aim_target_for(7, -0.3)), ([-0.70, 0.0], [-0.70, 0.0]));
+        let pattern = with("aim_strategy = \"pattern\"\naim_pattern = [[-0.95, 0.45], [-0.5, -0.45], [-1.0, 0.0]]")
+            .unwrap()
+            .strike;
+        let targets: Vec<[f64; 2]> = (0..4).map(|k| pattern.aim_target_for(k, 0.2)).collect();
+        assert_eq!(targets, [[-0.95, 0.45], [-0.5, -0.45], [-1.0, 0.0], [-0.95, 0.45]]);
+        let away = with("aim_strategy = \"away\"").map(|_| ()).unwrap_err().to_string();
+        assert!(away.contains("strike.aim_target") && away.contains("away"), "{away}");
+        let text = DEFAULT_STRIKE
+            .replace("aim_strategy = \"point\"", "aim_strategy = \"away\"")
+            .replace("aim_target = [-0.70, 0.0]", "aim_target = [-0.90, 0.40]");
+        let away =
+            Calibration::from_texts((DEFAULT_PHYSICS, p), (DEFAULT_TABLE, p), (&text, p), (DEFAULT_ROBOT, p)).unwrap();
+        // From the opponent's right (y > 0 in T) to their left, and back.
+        assert_eq!(away.strike.aim_target_for(0, 0.3), [-0.90, -0.40]);
+        assert_eq!(away.strike.aim_target_for(1, -0.3), [-0.90, 0.40]);
+        for (lines, why) in [
+            ("aim_strategy = \"pattern\"", "1 to 16 targets"),
+            ("aim_strategy = \"pattern\"\naim_pattern = [[-0.9, 0.4], [0.5, 0.0]]", "on the opponent's half"),
+            ("aim_strategy = \"sideways\"", "aim_strategy"),
+        ] {
+            let e = with(lines).map(|_| ()).unwrap_err().to_string();
+            assert!(e.contains(why), "{lines}: {e}");
+        }
     }
 
     #[test]

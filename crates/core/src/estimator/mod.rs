@@ -283,6 +283,8 @@ struct Track {
     smoothed: bool,
     /// The plane of the hitting volume the last plan met the ball on.
     hit_x: Option<f64>,
+    /// Where this ball's return is aimed (`strike.aim_strategy`), m.
+    target: [f64; 2],
     /// The spin the ceiling camera read (rad/s, table frame) and the σ of
     /// the ln of its scale against the flight's reading, once fused.
     logo: Option<(Vec3, f64)>,
@@ -602,6 +604,7 @@ impl Estimator {
             batch_from: 0,
             smoothed: false,
             hit_x: None,
+            target: self.strike.aim_target_for(id, inliers[0].pos.y),
             logo: None,
         });
         out.push(EstimatorEvent::Started { trajectory: id, t: last.t, start_outliers: outliers.len() as u8 });
@@ -773,7 +776,7 @@ impl Estimator {
             }
             AimMode::Landing => {
                 let tilt0 = -stroke::paper_beta(&self.strike, &spin);
-                let target = self.strike.aim_target;
+                let target = track.target;
                 let warm = track.aim.as_ref();
                 let p = &hit.state.pos;
                 let bounds = match self.reach.get(plane) {
