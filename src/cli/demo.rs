@@ -271,12 +271,17 @@ pub fn table(r: &DemoReport) -> String {
         },
         if fails.is_empty() { String::new() } else { format!("; not returned: {}", fails.join(", ")) }
     );
-    let [early, late] = r.timing_tolerance_ms_median;
     if r.returns > 0 {
+        // Each side is measured up to the span: at it, "at least".
+        let side = |ms: f64| {
+            let at_least = ms >= topspin_sim::returns::TIMING_SPAN_MS as f64;
+            format!("{}{ms:.0} ms", if at_least { "≥ " } else { "" })
+        };
+        let [early, late] = r.timing_tolerance_ms_median.map(side);
         let _ = writeln!(
             out,
-            "timing tolerance of the returns (median): the same strokes return the ball {early:.0} ms earlier to \
-             {late:.0} ms later"
+            "timing tolerance of the returns (median): the same strokes return the ball {early} earlier to {late} \
+             later"
         );
     }
     let _ = writeln!(
