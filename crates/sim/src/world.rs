@@ -131,7 +131,7 @@ pub fn run_virtual(cfg: &DemoConfig, cal: &Calibration) -> VirtualRun {
             LogoStream::new(l.camera.clone(), method),
         )
     });
-    let (mut logo_spins_fused, mut logo_spins_gated) = (0, 0);
+    let mut logo_spins = LogoSpins::default();
     let mut last_plans: Vec<StrikePlan> = Vec::new();
     let mut next = 0;
     while pair.now() < end {
@@ -145,10 +145,8 @@ pub fn run_virtual(cfg: &DemoConfig, cal: &Calibration) -> VirtualRun {
             if let (Some(c), Some(cam)) = (crop_at, camera.as_mut())
                 && tracker_at.is_none_or(|t| c < t)
             {
-                if let Some(spin) = cam.deliver_next()
-                    && let Some(EstimatorEvent::LogoSpin { accepted, .. }) = estimator.observe_logo_spin(&spin)
-                {
-                    *(if accepted { &mut logo_spins_fused } else { &mut logo_spins_gated }) += 1;
+                if let Some(spin) = cam.deliver_next() {
+                    logo_spins.count(estimator.observe_logo_spin(&spin));
                 }
                 continue;
             }
@@ -168,10 +166,8 @@ pub fn run_virtual(cfg: &DemoConfig, cal: &Calibration) -> VirtualRun {
             }
         }
         // A sequence gone quiet ends (the logo thread's receive timeout).
-        if let Some(spin) = camera.as_mut().and_then(|c| c.stream.poll(request_arrives))
-            && let Some(EstimatorEvent::LogoSpin { accepted, .. }) = estimator.observe_logo_spin(&spin)
-        {
-            *(if accepted { &mut logo_spins_fused } else { &mut logo_spins_gated }) += 1;
+        if let Some(spin) = camera.as_mut().and_then(|c| c.stream.poll(request_arrives)) {
+            logo_spins.count(estimator.observe_logo_spin(&spin));
         }
         if pair.step().is_none() {
             break; // RSI stopped: the controller would need a restart
@@ -189,9 +185,24 @@ pub fn run_virtual(cfg: &DemoConfig, cal: &Calibration) -> VirtualRun {
         last_plans,
         injected,
         logo: camera.map(|c| c.stream.counters()),
-        logo_spins_fused,
-        logo_spins_gated,
+        logo_spins_fused: logo_spins.fused,
+        logo_spins_gated: logo_spins.gated,
         per_ball,
+    }
+}
+
+/// Logo spins the estimator fused, and refused at its gate.
+#[derive(Default)]
+struct LogoSpins {
+    fused: u64,
+    gated: u64,
+}
+
+impl LogoSpins {
+    fn count(&mut self, event: Option<EstimatorEvent>) {
+        if let Some(EstimatorEvent::LogoSpin { accepted, .. }) = event {
+            *(if accepted { &mut self.fused } else { &mut self.gated }) += 1;
+        }
     }
 }
 
