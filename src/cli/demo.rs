@@ -77,10 +77,11 @@ pub struct DemoArgs {
     /// wheel launcher; the daemon knows only the calibration.
     #[arg(long, value_name = "NAME")]
     pub world: Option<String>,
-    /// Where the balls come from: `launcher` (the nine settings), or real
-    /// human strokes measured right after the racket: `human-rally`,
-    /// `human-serve`, `human` (both).
-    #[arg(long, default_value_t = topspin_sim::Strokes::Launcher, value_name = "SOURCE")]
+    /// Where the balls come from: `launcher` (the nine settings),
+    /// `aimed-launcher` (the same, every ball aimed through the hitting
+    /// volume's window), or real human strokes measured right after the
+    /// racket: `human-rally`, `human-serve`, `human` (both).
+    #[arg(long, default_value_t = topspin_sim::Strokes::AimedLauncher, value_name = "SOURCE")]
     pub strokes: topspin_sim::Strokes,
 }
 

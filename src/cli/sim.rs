@@ -54,9 +54,10 @@ pub struct SimOptions {
     /// topspin-high); ball k takes setting k mod their number.
     #[arg(long, default_value = "all")]
     pub setting: String,
-    /// Where the balls come from: `launcher` (the settings above), or real
-    /// human strokes measured right after the racket: `human-rally`,
-    /// `human-serve`, `human` (both).
+    /// Where the balls come from: `launcher` (the settings above),
+    /// `aimed-launcher` (the same, every ball aimed through the hitting
+    /// volume's window), or real human strokes measured right after the
+    /// racket: `human-rally`, `human-serve`, `human` (both).
     #[arg(long, default_value_t = sim::Strokes::Launcher, value_name = "SOURCE")]
     pub strokes: sim::Strokes,
     /// Tracker noise, standard deviation per axis, mm.
@@ -179,28 +180,30 @@ pub fn run(args: SimArgs) -> anyhow::Result<()> {
         }
     } else {
         if a.setting.trim() != "all" {
-            return Err(bad("--setting chooses launcher balls; it does not apply with --strokes human-…"));
-        }
-        let (human, o) = sim::simulate_in(None, a.strokes, &p.cal, a.seed, a.balls, &p.tracker);
-        if human.len() < a.balls {
             return Err(bad(format!(
-                "--strokes {}: {} of {} balls never reached the robot's half",
-                a.strokes,
-                a.balls - human.len(),
-                a.balls
+                "--setting chooses the launcher's balls; it does not apply with --strokes {}",
+                a.strokes
             )));
         }
-        eprintln!(
-            "topspin sim: {} states of {} passed over, never on the robot's half (net {}, long {}, wide {}, serve \
+        let (drawn, o) = sim::simulate_in(None, a.strokes, &p.cal, a.seed, a.balls, &p.tracker);
+        if drawn.len() < a.balls {
+            let why =
+                if a.strokes.is_launcher() { "the launcher could not aim" } else { "never reached the robot's half" };
+            return Err(bad(format!("--strokes {}: {} of {} balls {why}", a.strokes, a.balls - drawn.len(), a.balls)));
+        }
+        if !a.strokes.is_launcher() {
+            eprintln!(
+                "topspin sim: {} states of {} passed over, never on the robot's half (net {}, long {}, wide {}, serve \
              faults {})",
-            o.total(),
-            a.strokes,
-            o.net,
-            o.long,
-            o.wide,
-            o.serve
-        );
-        balls = human;
+                o.total(),
+                a.strokes,
+                o.net,
+                o.long,
+                o.wide,
+                o.serve
+            );
+        }
+        balls = drawn;
     }
     let ends: Vec<f64> = balls.iter().map(|b| b.truth.end_t).collect();
     let starts = sim::schedule(&ends, a.gap);

@@ -30,6 +30,9 @@ pub enum Strokes {
     /// The launcher's nine settings, aimed at the robot's half.
     #[default]
     Launcher,
+    /// The same, aimed as a lab aims its launcher at its robot: every
+    /// ball passes through the hitting volume's window.
+    AimedLauncher,
     /// Human rally strokes.
     HumanRally,
     /// Human serves.
@@ -39,11 +42,18 @@ pub enum Strokes {
 }
 
 impl Strokes {
-    pub const ALL: [Strokes; 4] = [Strokes::Launcher, Strokes::HumanRally, Strokes::HumanServe, Strokes::Human];
+    pub const ALL: [Strokes; 5] =
+        [Strokes::Launcher, Strokes::AimedLauncher, Strokes::HumanRally, Strokes::HumanServe, Strokes::Human];
+
+    /// One of the launcher's sources (its settings, not human states).
+    pub fn is_launcher(self) -> bool {
+        matches!(self, Strokes::Launcher | Strokes::AimedLauncher)
+    }
 
     fn name(self) -> &'static str {
         match self {
             Strokes::Launcher => "launcher",
+            Strokes::AimedLauncher => "aimed-launcher",
             Strokes::HumanRally => "human-rally",
             Strokes::HumanServe => "human-serve",
             Strokes::Human => "human",
@@ -55,7 +65,7 @@ impl Strokes {
         let all = human_states();
         let serves = all.partition_point(|s| !s.serve);
         match self {
-            Strokes::Launcher => &[],
+            Strokes::Launcher | Strokes::AimedLauncher => &[],
             Strokes::HumanRally => &all[..serves],
             Strokes::HumanServe => &all[serves..],
             Strokes::Human => all,
@@ -77,7 +87,7 @@ impl fmt::Display for Strokes {
 
 /// A stroke source name that is not one of [`Strokes::ALL`].
 #[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
-#[error("unknown strokes `{0}` (expected launcher, human-rally, human-serve or human)")]
+#[error("unknown strokes `{0}` (expected launcher, aimed-launcher, human-rally, human-serve or human)")]
 pub struct UnknownStrokes(pub String);
 
 impl FromStr for Strokes {

@@ -171,7 +171,7 @@ fn returns_over_seeds() {
             .with_launcher_axes()
     });
     let strokes = std::env::var("STROKES")
-        .map_or(Strokes::Launcher, |s| s.parse().expect("STROKES: launcher, human-rally, human-serve or human"));
+        .map_or(Strokes::Launcher, |s| s.parse().expect("STROKES: a stroke source of topspin demo --strokes"));
     let logo = std::env::var("LOGO").ok().map(|m| {
         logo_runtime(match m.as_str() {
             "background" => LogoMethodChoice::Background,
