@@ -94,6 +94,9 @@ fn a_live_client_receives_the_scene_and_latency() {
     let cell = SceneUpdate::decode(first(Topic::Cell).1.as_slice()).unwrap();
     let ids: Vec<_> = cell.entities.iter().map(|e| e.id.as_str()).collect();
     assert_eq!(ids, ["table", "robot", "hitting_window"]);
+    // The hitting plane's window and the volume's nearest plane's.
+    let xs: Vec<f64> = cell.entities[2].lines.iter().map(|l| l.points[0].x).collect();
+    assert_eq!(xs, [1.60, 1.45], "{xs:?}");
     let tf = FrameTransform::decode(first(Topic::Tf).1.as_slice()).unwrap();
     assert_eq!((tf.parent_frame_id.as_str(), tf.child_frame_id.as_str()), ("table", "robot_base"));
     let tcp = PosesInFrame::decode(first(Topic::Tcp).1.as_slice()).unwrap();

@@ -16,7 +16,7 @@
 //!
 //! | topic | schema | what |
 //! |---|---|---|
-//! | `/view/cell` | `foxglove.SceneUpdate` | table, lines and net; robot base and workspace box (in `robot_base`); the hitting window — again every [`CELL_INTERVAL_S`] for clients that join later |
+//! | `/view/cell` | `foxglove.SceneUpdate` | table, lines and net; robot base and workspace box (in `robot_base`); the hitting window (`hitting_window`: the hitting plane's, and the hitting volume's nearest plane's, fainter) — again every [`CELL_INTERVAL_S`] for clients that join later |
 //! | `/tf` | `foxglove.FrameTransform` | `table` → `robot_base` |
 //! | `/view/ball` | `foxglove.SceneUpdate` | each observation (`obs/<n>`, [`OBS_LIFETIME_S`]; cyan tracked, grey not tracked, red rejected by the EKF gate), the EKF estimate (`ekf`), the predicted path through the bounce to the hitting plane (`prediction`, with the crossing `hit`) after every observation, the spin arrow with its magnitude (`spin`), the logo direction (`logo`); these five expire [`TRACK_LIFETIME_S`] after their last update |
 //! | `/view/robot` | `foxglove.SceneUpdate` | the planned bat (`bat_plan`: a disc at the hitting point, its velocity arrow); the arm from the forward kinematics of the actual joints (`arm_actual`, from `AIPos`: a cylinder per link, a sphere per joint and at the TCP, in `table`, metadata `ipoc`) and its ghost from the commanded joints (`arm_commanded`, from `ASPos`: translucent, ahead of the actual by the dead time and lag) (`viewer::arm`); the actual and commanded TCP (`tcp_actual`, `tcp_commanded`, bat discs in `robot_base`); the arm and TCP every [`TCP_DECIMATION`]th RSI cycle, expiring [`ROBOT_LIFETIME_S`] after their last update |

@@ -278,24 +278,31 @@ impl ViewerSink {
             ..Default::default()
         };
         let s = &self.cal.strike;
-        let x = s.hit_plane_x;
+        // The hitting plane's window, and the hitting volume's nearest
+        // plane with its own (narrower) window, when there is a volume.
+        let outline = |x: f64, y: [f64; 2], alpha: f64| fm::LinePrimitive {
+            r#type: fm::line_primitive::Type::LineLoop as i32,
+            pose: Some(pose(Vec3::zeros(), IDENTITY)),
+            thickness: 0.005,
+            points: vec![
+                p3(Vec3::new(x, y[0], s.window_z[0])),
+                p3(Vec3::new(x, y[1], s.window_z[0])),
+                p3(Vec3::new(x, y[1], s.window_z[1])),
+                p3(Vec3::new(x, y[0], s.window_z[1])),
+            ],
+            color: Some(color(1.0, 0.9, 0.1, alpha)),
+            ..Default::default()
+        };
+        let mut lines = vec![outline(s.hit_plane_x, s.window_y, 1.0)];
+        let near = s.depth()[0];
+        if near < s.hit_plane_x {
+            lines.push(outline(near, s.hit_depth_window_y.unwrap_or(s.window_y), 0.5));
+        }
         let window = fm::SceneEntity {
             timestamp: ts,
             frame_id: FRAME_TABLE.into(),
             id: "hitting_window".into(),
-            lines: vec![fm::LinePrimitive {
-                r#type: fm::line_primitive::Type::LineLoop as i32,
-                pose: Some(pose(Vec3::zeros(), IDENTITY)),
-                thickness: 0.005,
-                points: vec![
-                    p3(Vec3::new(x, s.window_y[0], s.window_z[0])),
-                    p3(Vec3::new(x, s.window_y[1], s.window_z[0])),
-                    p3(Vec3::new(x, s.window_y[1], s.window_z[1])),
-                    p3(Vec3::new(x, s.window_y[0], s.window_z[1])),
-                ],
-                color: Some(color(1.0, 0.9, 0.1, 1.0)),
-                ..Default::default()
-            }],
+            lines,
             ..Default::default()
         };
         self.out.proto(Topic::Cell, &fm::SceneUpdate { deletions: vec![], entities: vec![table, robot, window] }, at);
