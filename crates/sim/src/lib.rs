@@ -87,26 +87,16 @@ pub fn simulate_in(
         return (balls, redraws);
     }
     let hit_x = cal.strike.hit_plane_x;
-    if strokes == Strokes::AimedLauncher {
-        let balls = (0..n)
-            .filter_map(|k| {
-                let physics = world.map_or_else(|| cal.propagator(), |w| worlds::ball_physics(w, cal, seed, k));
-                let axis = world.map_or(SpinAxis::Perpendicular, |w| w.axis);
-                let (mut rng_l, mut rng_t) = ball_rngs(seed, k);
-                let l =
-                    launcher::launch_into_reach(Setting::ALL[k % 9], axis, &physics, &cal.strike, &mut rng_l).ok()?;
-                let truth = Truth::compute(&l, &physics, hit_x);
-                let observations = observe(&truth, &physics, tracker, 0.0, &mut rng_t);
-                Some(SimBall { index: k, truth, observations, physics })
-            })
-            .collect();
-        return (balls, redraws);
-    }
     let balls = (0..n)
         .filter_map(|k| {
             let physics = world.map_or_else(|| cal.propagator(), |w| worlds::ball_physics(w, cal, seed, k));
             let (mut rng_l, mut rng_t) = ball_rngs(seed, k);
-            let l = strokes::draw_human(strokes, &physics, &mut rng_l, &mut redraws)?;
+            let l = if strokes == Strokes::AimedLauncher {
+                let axis = world.map_or(SpinAxis::Perpendicular, |w| w.axis);
+                launcher::launch_into_reach(Setting::ALL[k % 9], axis, &physics, &cal.strike, &mut rng_l).ok()?
+            } else {
+                strokes::draw_human(strokes, &physics, &mut rng_l, &mut redraws)?
+            };
             let truth = Truth::compute(&l, &physics, hit_x);
             let observations = observe(&truth, &physics, tracker, 0.0, &mut rng_t);
             Some(SimBall { index: k, truth, observations, physics })
