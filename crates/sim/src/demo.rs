@@ -41,7 +41,7 @@ use topspin_core::physics::{Propagator, Vec3, rad_to_rps};
 use topspin_core::plan::StrikePlan;
 use topspin_core::stats::Summary;
 use topspin_core::time::{Duration, Instant};
-use topspin_core::wire::crop::{CROP_MAX_LEN, Crop};
+use topspin_core::wire::crop::CROP_MAX_LEN;
 use topspin_daemon::clock;
 use topspin_daemon::runtime::daemon::{Daemon, DaemonSummary, LinkState, RuntimeConfig, ThreadSpec};
 use topspin_daemon::runtime::rt::RtWarning;
@@ -778,19 +778,7 @@ fn stream_crops(
     let mut sent = 0;
     for (seq, (capture, f)) in items.into_iter().enumerate() {
         clock::sleep_until(capture + latency, Duration::from_micros(0));
-        let m = f.label.measured;
-        let n = Crop {
-            seq: seq as u32,
-            capture,
-            u: m.u as f32,
-            v: m.v as f32,
-            radius: m.radius as f32,
-            width: f.crop.width as u16,
-            height: f.crop.height as u16,
-            pixels: &f.crop.rgb,
-        }
-        .emit(&mut buf)
-        .map_err(|e| std::io::Error::other(e.to_string()))?;
+        let n = f.wire_crop(seq as u32, capture).emit(&mut buf).map_err(|e| std::io::Error::other(e.to_string()))?;
         if socket.send(&buf[..n]).is_ok() {
             sent += 1;
         }

@@ -35,6 +35,8 @@ use topspin_core::logo::detect::CropImage;
 use topspin_core::logo::pipeline::CropInput;
 use topspin_core::logo::view::BallView;
 use topspin_core::physics::{Propagator, Vec3};
+use topspin_core::time::Instant;
+use topspin_core::wire::crop::Crop as WireCrop;
 pub use topspin_core::wire::crop::crop_origin;
 
 /// Side of a crop, px (the paper's crops are 60 × 60).
@@ -198,6 +200,22 @@ impl Frame {
     /// The crop with its capture time and measured circle (a sequence's input).
     pub fn crop_input(&self) -> CropInput<'_> {
         CropInput { t: self.label.t, crop: self.crop_image(), circle: self.label.measured }
+    }
+
+    /// The crop as a TTI1 datagram carries it: number `seq`, captured at
+    /// `capture` on the receiver's clock, with the measured circle.
+    pub fn wire_crop(&self, seq: u32, capture: Instant) -> WireCrop<'_> {
+        let m = self.label.measured;
+        WireCrop {
+            seq,
+            capture,
+            u: m.u as f32,
+            v: m.v as f32,
+            radius: m.radius as f32,
+            width: self.crop.width as u16,
+            height: self.crop.height as u16,
+            pixels: &self.crop.rgb,
+        }
     }
 }
 

@@ -29,7 +29,6 @@ use topspin_core::logo::stream::{LogoCounters, LogoStream};
 use topspin_core::plan::StrikePlan;
 use topspin_core::rsi::session::{RsiSession, SessionConfig, SessionStats};
 use topspin_core::time::{Duration, Instant};
-use topspin_core::wire::crop::Crop;
 
 /// Where the virtual tracker's datagrams come from.
 const TRACKER: SocketAddr = SocketAddr::new(IpAddr::V4(Ipv4Addr::new(127, 0, 0, 1)), 40_001);
@@ -241,17 +240,6 @@ impl Camera {
     fn deliver_next(&mut self) -> Option<topspin_core::estimator::LogoSpin> {
         let (_, capture, k, i) = *self.crops.get(self.next)?;
         self.next += 1;
-        let f = &self.sequences[k].frames[i];
-        let m = f.label.measured;
-        self.stream.crop(&Crop {
-            seq: self.next as u32,
-            capture,
-            u: m.u as f32,
-            v: m.v as f32,
-            radius: m.radius as f32,
-            width: f.crop.width as u16,
-            height: f.crop.height as u16,
-            pixels: &f.crop.rgb,
-        })
+        self.stream.crop(&self.sequences[k].frames[i].wire_crop(self.next as u32, capture))
     }
 }

@@ -8,7 +8,6 @@ use topspin_core::logo::LogoMethod;
 use topspin_core::logo::stream::{LogoStream, Method, SEQUENCE_LEN};
 use topspin_core::physics::Vec3;
 use topspin_core::time::{Duration, Instant};
-use topspin_core::wire::crop::Crop;
 use topspin_sim::render::{BallColour, Scene, SequenceOptions, render_sequence};
 use topspin_sim::{Setting, TrackerModel, simulate_ball};
 
@@ -31,17 +30,7 @@ fn a_ball_passing_the_strip_gives_one_spin_near_the_truth() {
     let t0 = Instant::from_nanos(1_000_000_000);
     let at = |t: f64| t0 + Duration::from_nanos((t * 1e9) as u64);
     for f in &seq.frames {
-        let m = f.label.measured;
-        let c = Crop {
-            seq: f.label.frame as u32,
-            capture: at(f.label.t),
-            u: m.u as f32,
-            v: m.v as f32,
-            radius: m.radius as f32,
-            width: 60,
-            height: 60,
-            pixels: &f.crop.rgb,
-        };
+        let c = f.wire_crop(f.label.frame as u32, at(f.label.t));
         spins.extend(stream.crop(&c));
         // A repeated crop (same capture time) is dropped, not counted twice.
         assert!(stream.crop(&c).is_none());
