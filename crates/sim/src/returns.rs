@@ -32,7 +32,7 @@ use crate::truth::Flight;
 use topspin_core::calib::Calibration;
 use topspin_core::calib::robot::RobotFile;
 use topspin_core::estimator::aim::face_normal;
-use topspin_core::physics::{BallState, Bat, Event, Propagator, RacketModel, Regime, StopAt, Vec3};
+use topspin_core::physics::{BallState, Bat, Event, Impact, Propagator, RacketModel, Regime, StopAt, Vec3};
 use topspin_core::plan::{EulerZyx, face_tilt};
 use topspin_core::time::{Duration, Instant};
 
@@ -402,11 +402,35 @@ fn return_fail(
     start: Instant,
     t_hit: f64,
     path: &BatPath,
-) -> Result<Option<ReturnFail>, ()> {
-    let flight = Flight::new(launch, prop);
-    let touch = find_touch(&flight, start, t_hit, path, racket.radius, racket.params.bat_radius).map_err(|_| ())?;
-    let impact = racket.hit_bat(&touch.ball, &touch.bat).ok_or(())?;
+) -> Result<Option<ReturnFail>, NoContact> {
+    let (touch, impact) = contact(racket, prop, launch, start, t_hit, path)?;
     Ok(fly_return(prop, &impact.after, touch.t).0)
+}
+
+/// Why the bat gave the ball nothing.
+enum NoContact {
+    /// The face never met it: how near the ball's centre passed the
+    /// disc's where it crossed the face's plane (m; `None`: it never did).
+    Missed(Option<f64>),
+    /// The face met it running away from it.
+    RunningAway,
+}
+
+/// Where the face first meets the ball (`launch` at `start`, near its
+/// crossing `t_hit` s after launch) and what the rubber does to it.
+fn contact(
+    racket: &RacketModel,
+    prop: &Propagator,
+    launch: &Launch,
+    start: Instant,
+    t_hit: f64,
+    path: &BatPath,
+) -> Result<(Touch, Impact), NoContact> {
+    let flight = Flight::new(launch, prop);
+    let touch =
+        find_touch(&flight, start, t_hit, path, racket.radius, racket.params.bat_radius).map_err(NoContact::Missed)?;
+    let impact = racket.hit_bat(&touch.ball, &touch.bat).ok_or(NoContact::RunningAway)?;
+    Ok((touch, impact))
 }
 
 /// Judges the return of one ball: `launch` at `start` flying the physics
@@ -421,27 +445,24 @@ pub fn judge_return(
     path: &BatPath,
 ) -> ReturnJudgement {
     let racket = cal.racket_model();
-    let flight = Flight::new(launch, prop);
-    let bat_radius = racket.params.bat_radius;
-    let touch = match find_touch(&flight, start, t_hit, path, racket.radius, bat_radius) {
-        Ok(t) => t,
-        Err(miss) => {
-            let why = match miss {
-                Some(m) => format!(
-                    "position: the ball crossed the face's plane {:.0} mm from the bat's centre ({:.0} mm beyond its edge)",
-                    m * 1e3,
-                    (m - bat_radius) * 1e3
-                ),
-                None => format!(
-                    "timing: the face never reached the ball's path within ±{} ms of the hit",
-                    STROKE_WINDOW.0 / 1_000_000
-                ),
-            };
-            return ReturnJudgement::no_contact(why);
+    let (touch, impact) = match contact(&racket, prop, launch, start, t_hit, path) {
+        Ok(c) => c,
+        Err(NoContact::Missed(Some(m))) => {
+            return ReturnJudgement::no_contact(format!(
+                "position: the ball crossed the face's plane {:.0} mm from the bat's centre ({:.0} mm beyond its edge)",
+                m * 1e3,
+                (m - racket.params.bat_radius) * 1e3
+            ));
         }
-    };
-    let Some(impact) = racket.hit_bat(&touch.ball, &touch.bat) else {
-        return ReturnJudgement::no_contact("speed: the bat was running away from the ball".to_owned());
+        Err(NoContact::Missed(None)) => {
+            return ReturnJudgement::no_contact(format!(
+                "timing: the face never reached the ball's path within ±{} ms of the hit",
+                STROKE_WINDOW.0 / 1_000_000
+            ));
+        }
+        Err(NoContact::RunningAway) => {
+            return ReturnJudgement::no_contact("speed: the bat was running away from the ball".to_owned());
+        }
     };
     let after = impact.after;
     let (fail, landing) = fly_return(prop, &after, touch.t);
