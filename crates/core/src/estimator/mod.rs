@@ -497,9 +497,9 @@ impl Estimator {
             let along = flight.spin.normalize();
             let sigma =
                 ((along.transpose() * m.cov * along)[0].max(0.0).sqrt() / m.spin.norm()).max(LOGO_SCALE_SIGMA_FLOOR);
+            // The next observation gives the table its scale
+            // (`track_step`), against the filter's spin as it is then.
             track.logo = Some((m.spin, sigma));
-            track.prop.bounce = track.prop.bounce.with_spin_scale(k);
-            track.ekf.noise.bounce_spin_share = sigma;
             if self.cfg.learn.enabled && self.cfg.learn.spin {
                 self.session.spin.take_logo(&flight, k, sigma, &self.prop.bounce);
             }
