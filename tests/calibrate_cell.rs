@@ -20,6 +20,7 @@ use std::path::Path;
 use std::process::{Command, Stdio};
 use std::sync::mpsc;
 use std::time::Duration;
+use topspin_daemon::calib_files::CalibDir;
 
 use topspin_core::calib::Calibration;
 use topspin_sim::mock_krc::{self, MockKrcConfig};

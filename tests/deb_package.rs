@@ -143,10 +143,7 @@ fn every_asset_exists_and_the_folders_are_shipped_whole() {
         assert_eq!(at(&f), Some(format!("usr/share/topspin/rsi/{name}").as_str()), "{f} is not shipped");
     }
     // The logo model where `default_model()` looks for it once installed.
-    assert_eq!(
-        at("models/logo-compact.onnx").map(|d| format!("/{d}")),
-        Some(topspin_core::logo::cnn::INSTALLED_MODEL.to_owned())
-    );
+    assert_eq!(at("models/logo-compact.onnx").map(|d| format!("/{d}")), Some(topspin_cnn::INSTALLED_MODEL.to_owned()));
     assert_eq!(at("README.md"), Some("usr/share/doc/topspin/README.md"));
     assert_eq!(at("deploy/README.md"), Some("usr/share/doc/topspin/deploy.md"));
     // The unit's Documentation= names the packaged README.

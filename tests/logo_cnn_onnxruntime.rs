@@ -43,5 +43,5 @@ fn the_committed_model_runs_on_onnxruntime() {
     unsafe {
         std::env::set_var("ORT_DYLIB_PATH", &lib)
     };
-    common::logo_cnn::check(topspin_core::logo::cnn::Backend::OnnxRuntime);
+    common::logo_cnn::check(topspin_cnn::Backend::OnnxRuntime);
 }

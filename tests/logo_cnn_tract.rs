@@ -6,5 +6,5 @@ mod common;
 
 #[test]
 fn the_committed_model_runs_on_tract() {
-    common::logo_cnn::check(topspin_core::logo::cnn::Backend::Tract);
+    common::logo_cnn::check(topspin_cnn::Backend::Tract);
 }

@@ -15,6 +15,7 @@ use std::fmt::Write as _;
 use std::io::BufRead;
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
+use topspin_daemon::calib_files::CalibDir;
 
 use clap::{Args, Subcommand};
 
@@ -422,7 +423,7 @@ fn write_cell(dir: &Path, fit: &CellFit) -> Result<PathBuf, WriteError> {
     let old = std::fs::read_to_string(&path).map_err(|e| WriteError::Bad(bad(format!("{}: {e}", path.display()))))?;
     let new = cell::replace_cell_lines(&old, &fit.cell)
         .map_err(|e| WriteError::Bad(bad(format!("{}: {e}", path.display()))))?;
-    let loaded = Calibration::load_with_robot(Some(dir), &new)
+    let loaded = topspin_daemon::calib_files::load_with_robot(Some(dir), &new)
         .map_err(|e| WriteError::Refused(format!("the new robot.toml does not validate, not written: {e}")))?;
     if cell::cell_lines(&loaded.robot.cell) != fit.cell_lines() {
         return Err(WriteError::Refused(format!("{}: the edited [cell] does not read back", path.display())));

@@ -4,6 +4,7 @@
 //! failed, 2 for an unusable configuration or argument.
 
 use std::path::PathBuf;
+use topspin_daemon::calib_files::CalibDir;
 
 use clap::Args;
 

@@ -8,6 +8,7 @@
 //! predictor and fusion.
 
 use std::path::{Path, PathBuf};
+use topspin_daemon::calib_files::CalibDir;
 
 use clap::Args;
 
@@ -208,7 +209,7 @@ pub fn run_paper(a: EvalPaperArgs) -> anyhow::Result<()> {
         if let Some(m) = &a.cnn.model {
             command += &format!(" --model {}", m.display());
         }
-        if a.cnn.backend != topspin_core::logo::cnn::Backend::Auto {
+        if a.cnn.backend != topspin_cnn::Backend::Auto {
             command += &format!(" --backend {}", a.cnn.backend.name());
         }
     }

@@ -1,6 +1,7 @@
 //! `topspin fit FILE`: spin and prediction for one recorded flight (DESIGN §8).
 
 use std::path::{Path, PathBuf};
+use topspin_daemon::calib_files::CalibDir;
 
 use clap::{Args, ValueEnum};
 use serde_json::{Value, json};

@@ -7,6 +7,7 @@
 use std::fmt::Write as _;
 use std::net::{SocketAddr, UdpSocket};
 use std::path::PathBuf;
+use topspin_daemon::calib_files::CalibDir;
 
 use clap::Args;
 use serde::Serialize;

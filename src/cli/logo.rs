@@ -12,6 +12,7 @@
 
 use std::fmt::Write as _;
 use std::path::PathBuf;
+use topspin_daemon::calib_files::CalibDir;
 
 use serde_json::json;
 

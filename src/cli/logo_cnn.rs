@@ -10,14 +10,16 @@
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
+use topspin_daemon::calib_files::CalibDir;
 
 use serde_json::json;
 
 use super::BadInput;
 use super::crops::{FolderFrame, read_png};
+use topspin_cnn::{self as cnn, CnnOutput, LogoCnn};
 use topspin_core::calib::Calibration;
 use topspin_core::calib::camera::CameraCalib;
-use topspin_core::logo::cnn::{self, CnnOutput, LogoCnn, geodesic_deg, swing_to};
+use topspin_core::logo::cnn::{geodesic_deg, swing_to};
 use topspin_core::logo::rotation::RotationFitConfig;
 use topspin_core::physics::{Vec3, rad_to_rps};
 use topspin_core::stats::Summary;

@@ -3,6 +3,7 @@
 use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
+use topspin_daemon::calib_files::CalibDir;
 
 use anyhow::Context;
 use clap::Args;

@@ -23,6 +23,7 @@ use std::io::Write as _;
 use std::net::UdpSocket;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
+use topspin_daemon::calib_files::CalibDir;
 
 use serde_json::json;
 

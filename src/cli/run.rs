@@ -9,6 +9,7 @@
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
+use topspin_daemon::calib_files::CalibDir;
 
 use clap::Args;
 

@@ -9,6 +9,7 @@ use std::fmt::Write as _;
 use std::io::Write as _;
 use std::net::UdpSocket;
 use std::path::{Path, PathBuf};
+use topspin_daemon::calib_files::CalibDir;
 
 use anyhow::Context as _;
 use serde::Serialize;

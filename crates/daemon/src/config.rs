@@ -281,7 +281,7 @@ pub struct LogoConfig {
     pub model: PathBuf,
     /// `auto` (ONNX Runtime when ORT_DYLIB_PATH names it, else tract),
     /// `tract` or `onnxruntime`.
-    pub backend: topspin_core::logo::cnn::Backend,
+    pub backend: topspin_cnn::Backend,
     /// The logo thread's core (give it one of its own).
     pub core: Core,
 }
@@ -311,7 +311,7 @@ pub struct CalibConfig {
 }
 
 impl CalibConfig {
-    /// The folder to pass to [`topspin_core::calib::Calibration::load`].
+    /// The folder to pass to [`CalibDir::load`](crate::calib_files::CalibDir::load).
     pub fn dir(&self) -> Option<&Path> {
         (!self.dir.as_os_str().is_empty()).then_some(self.dir.as_path())
     }
@@ -371,7 +371,7 @@ impl Default for DaemonConfig {
                 crops_source: lo,
                 method: LogoMethodConfig::Background,
                 model: PathBuf::new(),
-                backend: topspin_core::logo::cnn::Backend::Auto,
+                backend: topspin_cnn::Backend::Auto,
                 core: Core(None),
             },
         }
@@ -534,11 +534,7 @@ impl DaemonConfig {
 
     /// `logo.model`, or the default model when empty.
     pub fn logo_model(&self) -> PathBuf {
-        if self.logo.model.as_os_str().is_empty() {
-            topspin_core::logo::cnn::default_model()
-        } else {
-            self.logo.model.clone()
-        }
+        if self.logo.model.as_os_str().is_empty() { topspin_cnn::default_model() } else { self.logo.model.clone() }
     }
 
     /// `tracker.noise_mm` in metres (for `EstimatorConfig::with_noise`).

@@ -11,6 +11,7 @@
 //! - [`rsi_identify`]: the UDP loop of `topspin identify` around the
 //!   sans-IO identifier.
 //! - [`config`]: the layered, validated configuration.
+//! - [`calib_files`]: the calibration read from a `calib/` folder.
 //! - [`systemd`]: readiness and watchdog notifications.
 //! - [`record`]: session recording (MCAP) and bit-exact replay.
 //! - [`channels`]: the topics and schemas the recording and the view share.
@@ -19,6 +20,7 @@
 //! - [`doctor`]: is this PC ready for the 4 ms loop (`topspin doctor`).
 //! - [`touch`]: the RSI listener that reads touch points (`topspin calibrate cell --rsi`).
 
+pub mod calib_files;
 pub mod channels;
 pub mod clock;
 pub mod config;

@@ -5,8 +5,8 @@
 //! here exact: no late answer is the machine's, every datagram the
 //! injector sent reaches the ingest, and the same seed gives the same run.
 
+use topspin_cnn as cnn;
 use topspin_core::calib::Calibration;
-use topspin_core::logo::cnn;
 use topspin_core::time::Duration;
 use topspin_daemon::runtime::daemon::{LogoMethodChoice, LogoRuntime};
 use topspin_sim::Strokes;

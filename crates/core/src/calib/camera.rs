@@ -2,8 +2,8 @@
 //! intrinsics, the read-out region of interest, the pose in the table frame
 //! T, frame rate and exposure, and the ball's printed logo.
 //!
-//! Standalone for now: [`CameraCalib::load`] reads `camera.toml` from a
-//! folder, or the compiled-in default. Frames: the camera frame C has x
+//! Standalone for now: [`CameraCalib::parse`] reads a `camera.toml` text (the
+//! daemon reads the file, or takes [`DEFAULT_CAMERA`]). Frames: the camera frame C has x
 //! along image u (right), y along image v (down) and z along the optical
 //! axis; pixel centres lie at integer coordinates of the full sensor.
 
@@ -16,7 +16,8 @@ use crate::calib::CalibError;
 use crate::physics::Vec3;
 
 /// The compiled-in default (the repository's `calib/camera.toml`).
-pub(crate) const DEFAULT_CAMERA: &str = include_str!("../../../../calib/camera.toml");
+/// The repository's `calib/camera.toml`, compiled in.
+pub const DEFAULT_CAMERA: &str = include_str!("../../../../calib/camera.toml");
 
 /// `[camera]` of `calib/camera.toml`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -81,26 +82,6 @@ impl CameraCalib {
     /// The compiled-in camera (the repository's `calib/camera.toml`).
     pub fn default_camera() -> Self {
         Self::parse(DEFAULT_CAMERA, Path::new("<default>/camera.toml")).expect("compiled-in camera is valid (tested)")
-    }
-
-    /// Loads `dir/camera.toml` (the compiled default where `dir` is `None`
-    /// or holds no `camera.toml`) and validates it.
-    pub fn load(dir: Option<&Path>) -> Result<Self, CalibError> {
-        if let Some(d) = dir {
-            if !d.is_dir() {
-                return Err(CalibError::Read {
-                    path: d.to_owned(),
-                    source: std::io::Error::new(std::io::ErrorKind::NotFound, "not a directory"),
-                });
-            }
-            let path = d.join("camera.toml");
-            if path.exists() {
-                let text =
-                    std::fs::read_to_string(&path).map_err(|source| CalibError::Read { path: path.clone(), source })?;
-                return Self::parse(&text, &path);
-            }
-        }
-        Self::parse(DEFAULT_CAMERA, Path::new("<default>/camera.toml"))
     }
 
     /// Parses and validates the text of a `camera.toml`.
@@ -244,6 +225,5 @@ mod tests {
         let text = DEFAULT_CAMERA.replace("roi = [0, 400, 1920, 400]", "roi = [0, 900, 1920, 400]");
         let e = CameraCalib::parse(&text, Path::new("x/camera.toml")).unwrap_err().to_string();
         assert!(e.contains("camera.roi"), "{e}");
-        assert!(CameraCalib::load(Some(Path::new("/nonexistent/topspin"))).is_err());
     }
 }

@@ -15,10 +15,14 @@ pub mod robot;
 pub use robot::RobotFile;
 
 /// The compiled-in defaults (the repository's `calib/` folder).
-const DEFAULT_PHYSICS: &str = include_str!("../../../../calib/physics.toml");
-const DEFAULT_TABLE: &str = include_str!("../../../../calib/table.toml");
-const DEFAULT_STRIKE: &str = include_str!("../../../../calib/strike.toml");
-pub(crate) const DEFAULT_ROBOT: &str = include_str!("../../../../calib/robot.toml");
+/// The repository's `calib/physics.toml`, compiled in.
+pub const DEFAULT_PHYSICS: &str = include_str!("../../../../calib/physics.toml");
+/// The repository's `calib/table.toml`, compiled in.
+pub const DEFAULT_TABLE: &str = include_str!("../../../../calib/table.toml");
+/// The repository's `calib/strike.toml`, compiled in.
+pub const DEFAULT_STRIKE: &str = include_str!("../../../../calib/strike.toml");
+/// The repository's `calib/robot.toml`, compiled in.
+pub const DEFAULT_ROBOT: &str = include_str!("../../../../calib/robot.toml");
 
 /// `calib/physics.toml`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -332,59 +336,17 @@ fn key_at(text: &str, at: usize) -> Option<(String, usize)> {
     Some((section.map_or_else(|| key.map(str::to_owned), |s| key.map(|k| format!("{s}.{k}")))?, line))
 }
 
-fn read_or_default(dir: Option<&Path>, name: &str, default: &'static str) -> Result<(String, PathBuf), CalibError> {
-    match dir {
-        Some(d) => {
-            let path = d.join(name);
-            if path.exists() {
-                let text =
-                    std::fs::read_to_string(&path).map_err(|source| CalibError::Read { path: path.clone(), source })?;
-                return Ok((text, path));
-            }
-            Ok((default.to_owned(), PathBuf::from(format!("<default>/{name}"))))
-        }
-        None => Ok((default.to_owned(), PathBuf::from(format!("<default>/{name}")))),
-    }
-}
-
 impl Calibration {
     /// The compiled-in calibration (the repository's `calib/`).
     pub fn default_cell() -> Self {
-        Self::load(None).expect("compiled-in calibration is valid (tested)")
-    }
-
-    /// Loads `dir` (or the compiled defaults with `None`) and validates it.
-    pub fn load(dir: Option<&Path>) -> Result<Self, CalibError> {
-        if let Some(d) = dir
-            && !d.is_dir()
-        {
-            return Err(CalibError::Read {
-                path: d.to_owned(),
-                source: std::io::Error::new(std::io::ErrorKind::NotFound, "not a directory"),
-            });
-        }
-        let physics = read_or_default(dir, "physics.toml", DEFAULT_PHYSICS)?;
-        let table = read_or_default(dir, "table.toml", DEFAULT_TABLE)?;
-        let strike = read_or_default(dir, "strike.toml", DEFAULT_STRIKE)?;
-        let robot = read_or_default(dir, "robot.toml", DEFAULT_ROBOT)?;
-        Self::from_texts((&physics.0, &physics.1), (&table.0, &table.1), (&strike.0, &strike.1), (&robot.0, &robot.1))
-    }
-
-    /// Loads `dir` as [`load`](Self::load) does, with `robot_text` in place
-    /// of its `robot.toml` (errors name `dir/robot.toml`): how a new
-    /// `robot.toml` is checked against the rest of the cell before it
-    /// replaces the old one.
-    pub fn load_with_robot(dir: Option<&Path>, robot_text: &str) -> Result<Self, CalibError> {
-        let physics = read_or_default(dir, "physics.toml", DEFAULT_PHYSICS)?;
-        let table = read_or_default(dir, "table.toml", DEFAULT_TABLE)?;
-        let strike = read_or_default(dir, "strike.toml", DEFAULT_STRIKE)?;
-        let robot_path = dir.map_or_else(|| PathBuf::from("<default>/robot.toml"), |d| d.join("robot.toml"));
+        let at = |name: &str| PathBuf::from(format!("<default>/{name}"));
         Self::from_texts(
-            (&physics.0, &physics.1),
-            (&table.0, &table.1),
-            (&strike.0, &strike.1),
-            (robot_text, &robot_path),
+            (DEFAULT_PHYSICS, &at("physics.toml")),
+            (DEFAULT_TABLE, &at("table.toml")),
+            (DEFAULT_STRIKE, &at("strike.toml")),
+            (DEFAULT_ROBOT, &at("robot.toml")),
         )
+        .expect("compiled-in calibration is valid (tested)")
     }
 
     /// Parses and validates the four files' texts (each with the path its
@@ -630,6 +592,12 @@ impl Calibration {
 mod tests {
     use super::*;
 
+    /// The default cell with `robot` as its `robot.toml`.
+    fn with_robot(robot: &str) -> Result<Calibration, CalibError> {
+        let p = Path::new("<test>");
+        Calibration::from_texts((DEFAULT_PHYSICS, p), (DEFAULT_TABLE, p), (DEFAULT_STRIKE, p), (robot, p))
+    }
+
     #[test]
     fn compiled_defaults_load() {
         let c = Calibration::default_cell();
@@ -721,34 +689,12 @@ mod tests {
     }
 
     #[test]
-    fn a_bad_value_is_named() {
-        let dir = std::env::temp_dir().join(format!("topspin-calib-test-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        std::fs::write(dir.join("strike.toml"), DEFAULT_STRIKE.replace("hit_plane_x = 1.60", "hit_plane_x = -3.0"))
-            .unwrap();
-        let e = Calibration::load(Some(&dir)).unwrap_err().to_string();
-        assert!(e.contains("strike.hit_plane_x"), "{e}");
-        std::fs::write(dir.join("strike.toml"), DEFAULT_STRIKE.replace("hit_plane_x = 1.60", "hit_plane = 1.6"))
-            .unwrap();
-        let e = Calibration::load(Some(&dir)).unwrap_err().to_string();
-        assert!(e.contains("hit_plane"), "{e}");
-        std::fs::write(
-            dir.join("strike.toml"),
-            DEFAULT_STRIKE.replace("window_y = [-0.60, 0.60]", "window_y = [-0.90, 0.60]"),
-        )
-        .unwrap();
-        let e = Calibration::load(Some(&dir)).unwrap_err().to_string();
-        assert!(e.contains("strike.window_y") && e.contains("workspace"), "{e}");
-        std::fs::remove_dir_all(&dir).unwrap();
-    }
-
-    #[test]
     fn a_value_of_the_wrong_type_is_named_by_its_key() {
         let robot = DEFAULT_ROBOT.replacen("speed_deg_s = [360.0,", "speed_deg_s = [\"fast\",", 1);
-        let e = Calibration::load_with_robot(None, &robot).map(|_| ()).unwrap_err().to_string();
+        let e = with_robot(&robot).map(|_| ()).unwrap_err().to_string();
         assert!(e.contains("`joints.speed_deg_s` (line ") && e.contains("\"fast\""), "{e}");
         let robot = DEFAULT_ROBOT.replacen("lag_ms = ", "lag_ms = \"15\" # ", 1);
-        let e = Calibration::load_with_robot(None, &robot).map(|_| ()).unwrap_err().to_string();
+        let e = with_robot(&robot).map(|_| ()).unwrap_err().to_string();
         assert!(e.contains("`servo.lag_ms`"), "{e}");
     }
 
@@ -766,12 +712,12 @@ mod tests {
         let robot = DEFAULT_ROBOT
             .replace("min_deg = [-170.0,", "min_deg = [-20.0,")
             .replace("max_deg = [170.0,", "max_deg = [20.0,");
-        let e = Calibration::load_with_robot(None, &robot).map(|_| ()).unwrap_err().to_string();
+        let e = with_robot(&robot).map(|_| ()).unwrap_err().to_string();
         assert!(e.contains("strike.window_y") && e.contains("joints.min_deg") && e.contains("reaches"), "{e}");
         // ±60° still reaches most of it.
         let robot = DEFAULT_ROBOT
             .replace("min_deg = [-170.0,", "min_deg = [-60.0,")
             .replace("max_deg = [170.0,", "max_deg = [60.0,");
-        assert!(Calibration::load_with_robot(None, &robot).is_ok());
+        assert!(with_robot(&robot).is_ok());
     }
 }

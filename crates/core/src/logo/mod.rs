@@ -14,8 +14,8 @@
 //!   (plane, projected angles, half-revolution rule, regression line);
 //!   shared with any other source of logo positions (a CNN).
 //! - [`pipeline`]: a whole sequence of crops → spin in the table frame.
-//! - [`cnn`]: the paper's second method, a network through `ort` (tract or
-//!   ONNX Runtime) from a crop to the logo's visibility and position.
+//! - [`cnn`]: the paper's second method's contract, a network from a crop
+//!   to the logo's visibility and position (the engine is `topspin-cnn`).
 //! - [`fusion`]: the logo's spin and the trajectory's, combined by their
 //!   covariances behind a χ² gate.
 //! - [`stream`]: the logo thread's work: TTI1 crops → sequences → spins.

@@ -16,7 +16,7 @@
 use crate::calib::camera::CameraCalib;
 use crate::estimator::LogoSpin;
 use crate::logo::ball::Circle;
-use crate::logo::cnn::{self, CnnOutput, LogoCnn};
+use crate::logo::cnn::{self, CnnOutput, LogoNetwork};
 use crate::logo::detect::{CropImage, DetectorConfig};
 use crate::logo::fusion::SpinEstimate;
 use crate::logo::pipeline::{CropInput, LogoMethod, process_sequence};
@@ -38,14 +38,14 @@ pub enum Method {
     /// The paper's background subtraction with the given position method.
     Background(LogoMethod),
     /// The CNN.
-    Cnn(Box<LogoCnn>),
+    Cnn(Box<dyn LogoNetwork>),
 }
 
 impl std::fmt::Debug for Method {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
             Method::Background(m) => write!(f, "Background({})", m.name()),
-            Method::Cnn(c) => write!(f, "Cnn({})", c.backend().name()),
+            Method::Cnn(c) => write!(f, "Cnn({})", c.engine_name()),
         }
     }
 }
@@ -198,7 +198,7 @@ impl LogoStream {
             crops[k] = &self.pixels[i * CROP_BYTES..(i + 1) * CROP_BYTES];
         }
         let mut answers = [CnnOutput::default(); cnn::MAX_BATCH];
-        if net.infer(&crops[..to - from], &mut answers).is_err() {
+        if net.infer_crops(&crops[..to - from], &mut answers).is_err() {
             self.counters.inference_failures += 1;
         }
         // A failed batch counts as unseen logos.

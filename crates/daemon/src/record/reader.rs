@@ -1,5 +1,6 @@
 //! Reading a recording back (also one cut off by a crash).
 
+use crate::calib_files::CalibDir;
 use std::collections::HashMap;
 use std::net::SocketAddr;
 use std::path::Path;
@@ -53,7 +54,7 @@ pub struct Session {
 }
 
 impl Session {
-    /// The recorded calibration, rebuilt by [`Calibration::load`] from the
+    /// The recorded calibration, rebuilt by [`CalibDir::load`](crate::calib_files::CalibDir::load) from the
     /// recorded texts (written to a temporary folder, removed after).
     pub fn calibration(&self) -> Result<Calibration, RecordError> {
         static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);

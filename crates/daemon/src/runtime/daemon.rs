@@ -24,12 +24,12 @@ use super::telemetry::{
 };
 use crate::clock;
 use crate::rsi_server::{PlanReader, RsiServer, RsiSink, WaitStrategy, plan_slot};
+use topspin_cnn::{Backend, LogoCnn};
 use topspin_core::calib::Calibration;
 use topspin_core::calib::camera::CameraCalib;
 use topspin_core::estimator::{Estimator, EstimatorConfig, LogoSpin};
 use topspin_core::ingest::clock::ClockMap;
 use topspin_core::ingest::{Accepted, Ingest, IngestCounters};
-use topspin_core::logo::cnn::{Backend, LogoCnn};
 use topspin_core::logo::pipeline::LogoMethod;
 use topspin_core::logo::stream::{LogoCounters, LogoStream, Method};
 use topspin_core::motion::generator::Phase;

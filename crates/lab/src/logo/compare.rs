@@ -14,10 +14,10 @@ use serde::Serialize;
 
 use crate::eval::fit::{Window, windowed};
 use crate::logo::eval::MIN_FRAMES;
+use topspin_cnn::{self as cnn, LogoCnn};
 use topspin_core::calib::Calibration;
 use topspin_core::calib::camera::CameraCalib;
 use topspin_core::fit::{FitConfig, Method as FitMethod, fit_trajectory};
-use topspin_core::logo::cnn::{self, LogoCnn};
 use topspin_core::logo::detect::DetectorConfig;
 use topspin_core::logo::fusion::{Fused, SpinEstimate, fuse};
 use topspin_core::logo::pipeline::{CropInput, LogoMethod, process_sequence};

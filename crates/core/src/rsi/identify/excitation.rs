@@ -50,7 +50,7 @@ const PRBS_HOLDS_S: [f64; 4] = [0.0, 0.012, 0.040, 0.100];
 const LFSR_SEED: u16 = 0xACE1;
 
 /// Which translational axes to excite (one after the other for `All`).
-#[derive(Copy, Clone, Debug, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Copy, Clone, Debug, PartialEq, Eq)]
 pub enum AxisChoice {
     /// X of BASE.
     X,

@@ -1,0 +1,103 @@
+//! Calibration from a folder: reads a `calib/` directory's files into the
+//! core's [`Calibration`] and [`CameraCalib`], which parse text only. A file
+//! missing from the folder is the compiled-in default (the repository's
+//! `calib/`); errors name the file they come from.
+
+use std::path::{Path, PathBuf};
+
+use topspin_core::calib::camera::{CameraCalib, DEFAULT_CAMERA};
+use topspin_core::calib::{CalibError, Calibration, DEFAULT_PHYSICS, DEFAULT_ROBOT, DEFAULT_STRIKE, DEFAULT_TABLE};
+
+/// A calibration that loads from a `calib/` folder.
+pub trait CalibDir: Sized {
+    /// Loads `dir` (or the compiled defaults with `None`) and validates it.
+    fn load(dir: Option<&Path>) -> Result<Self, CalibError>;
+}
+
+impl CalibDir for Calibration {
+    fn load(dir: Option<&Path>) -> Result<Self, CalibError> {
+        check_dir(dir)?;
+        let robot = read_or_default(dir, "robot.toml", DEFAULT_ROBOT)?;
+        from_dir(dir, (&robot.0, &robot.1))
+    }
+}
+
+impl CalibDir for CameraCalib {
+    fn load(dir: Option<&Path>) -> Result<Self, CalibError> {
+        check_dir(dir)?;
+        let (text, path) = read_or_default(dir, "camera.toml", DEFAULT_CAMERA)?;
+        CameraCalib::parse(&text, &path)
+    }
+}
+
+/// Loads `dir` as [`CalibDir::load`] does, with `robot_text` in place of
+/// its `robot.toml` (errors name `dir/robot.toml`): how a new `robot.toml`
+/// is checked against the rest of the cell before it replaces the old one.
+pub fn load_with_robot(dir: Option<&Path>, robot_text: &str) -> Result<Calibration, CalibError> {
+    let robot_path = dir.map_or_else(|| PathBuf::from("<default>/robot.toml"), |d| d.join("robot.toml"));
+    from_dir(dir, (robot_text, &robot_path))
+}
+
+fn from_dir(dir: Option<&Path>, robot: (&str, &Path)) -> Result<Calibration, CalibError> {
+    let physics = read_or_default(dir, "physics.toml", DEFAULT_PHYSICS)?;
+    let table = read_or_default(dir, "table.toml", DEFAULT_TABLE)?;
+    let strike = read_or_default(dir, "strike.toml", DEFAULT_STRIKE)?;
+    Calibration::from_texts((&physics.0, &physics.1), (&table.0, &table.1), (&strike.0, &strike.1), robot)
+}
+
+fn check_dir(dir: Option<&Path>) -> Result<(), CalibError> {
+    match dir {
+        Some(d) if !d.is_dir() => Err(CalibError::Read {
+            path: d.to_owned(),
+            source: std::io::Error::new(std::io::ErrorKind::NotFound, "not a directory"),
+        }),
+        _ => Ok(()),
+    }
+}
+
+/// `dir/name`'s text and path, or the compiled default's with the path
+/// `<default>/name` where `dir` is `None` or holds no such file.
+fn read_or_default(dir: Option<&Path>, name: &str, default: &'static str) -> Result<(String, PathBuf), CalibError> {
+    if let Some(path) = dir.map(|d| d.join(name))
+        && path.exists()
+    {
+        let text = std::fs::read_to_string(&path).map_err(|source| CalibError::Read { path: path.clone(), source })?;
+        return Ok((text, path));
+    }
+    Ok((default.to_owned(), PathBuf::from(format!("<default>/{name}"))))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_bad_value_is_named() {
+        let dir = tempfile::tempdir().unwrap();
+        let write = |text: String| std::fs::write(dir.path().join("strike.toml"), text).unwrap();
+        write(DEFAULT_STRIKE.replace("hit_plane_x = 1.60", "hit_plane_x = -3.0"));
+        let e = Calibration::load(Some(dir.path())).unwrap_err().to_string();
+        assert!(e.contains("strike.hit_plane_x"), "{e}");
+        write(DEFAULT_STRIKE.replace("hit_plane_x = 1.60", "hit_plane = 1.6"));
+        let e = Calibration::load(Some(dir.path())).unwrap_err().to_string();
+        assert!(e.contains("hit_plane"), "{e}");
+        write(DEFAULT_STRIKE.replace("window_y = [-0.60, 0.60]", "window_y = [-0.90, 0.60]"));
+        let e = Calibration::load(Some(dir.path())).unwrap_err().to_string();
+        assert!(e.contains("strike.window_y") && e.contains("workspace"), "{e}");
+    }
+
+    #[test]
+    fn a_folder_without_files_is_the_default_cell_and_a_file_is_no_folder() {
+        let dir = tempfile::tempdir().unwrap();
+        let c = Calibration::load(Some(dir.path())).unwrap();
+        assert_eq!(c.strike.hit_plane_x, Calibration::default_cell().strike.hit_plane_x);
+        assert_eq!(CameraCalib::load(Some(dir.path())).unwrap().f_px, CameraCalib::default_camera().f_px);
+        let file = dir.path().join("robot.toml");
+        std::fs::write(&file, DEFAULT_ROBOT).unwrap();
+        for e in [Calibration::load(Some(&file)).map(|_| ()), CameraCalib::load(Some(&file)).map(|_| ())] {
+            assert!(e.unwrap_err().to_string().contains("not a directory"));
+        }
+        let e = load_with_robot(Some(dir.path()), "[joints]\n").map(|_| ()).unwrap_err().to_string();
+        assert!(e.contains("robot.toml"), "{e}");
+    }
+}
