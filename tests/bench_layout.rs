@@ -4,7 +4,7 @@
 //! `shared` runs and its JSON names the layout and what each thread got;
 //! the mock KR C4 and tracker threads of the loopback run are pinned where
 //! asked, and a refusal is reported by thread, not fatal. No timing is
-//! asserted (the figures are the bench's, README "The running system").
+//! asserted (the figures are the bench's, docs/results.md, "The running system").
 
 use std::process::Command;
 

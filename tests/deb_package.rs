@@ -339,7 +339,7 @@ fn run_ok(c: &mut Command) -> Output {
 fn the_package_builds_unpacks_and_runs() {
     let name = "the_package_builds_unpacks_and_runs";
     if !cargo().args(["deb", "--version"]).output().is_ok_and(|o| o.status.success()) {
-        let note = "no cargo-deb: `cargo install cargo-deb --locked` (README, Installing on the robot PC)";
+        let note = "no cargo-deb: `cargo install cargo-deb --locked` (docs/guide/install.md)";
         if std::env::var_os("TOPSPIN_REQUIRE_CARGO_DEB").is_some_and(|v| v == "1") {
             panic!("{note} (TOPSPIN_REQUIRE_CARGO_DEB=1)");
         }

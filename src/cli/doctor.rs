@@ -68,7 +68,7 @@ Checks (pass / warn / fail; nothing needs root, nothing is changed):
                  Skipped while a `topspin run` process is alive (it would compete with its RSI thread).
 
 The limits and capabilities are this process's: run doctor as the service runs to see the service's
-(README, \"Is this PC ready?\").
+(docs/guide/doctor.md).
 
 Exit code: 0 nothing failed, 1 a check failed, 2 an unusable configuration or argument.
 

@@ -13,6 +13,8 @@
 //! Inference allocates inside the backend (output tensors), so it runs on
 //! the logo thread only, never on a hot thread; our own buffers are sized
 //! at load time.
+//!
+//! `DESIGN §n` in these docs cites section n of `docs/design.md`.
 
 #![warn(missing_docs)]
 #![deny(unreachable_pub)]
@@ -302,7 +304,7 @@ const DEFAULT_MODEL: &str = "models/logo-compact.onnx";
 /// `[package.metadata.deb]`).
 pub const INSTALLED_MODEL: &str = "/usr/share/topspin/models/logo-compact.onnx";
 
-/// The default model's path: `$TOPSPIN_LOGO_MODEL`, else [`DEFAULT_MODEL`]
+/// The default model's path: `$TOPSPIN_LOGO_MODEL`, else `DEFAULT_MODEL`
 /// at the workspace root when it exists (a source checkout), else
 /// [`INSTALLED_MODEL`] when it exists (the package), else the relative path.
 pub fn default_model() -> PathBuf {

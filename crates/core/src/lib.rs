@@ -22,6 +22,8 @@
 //! - [`calib`]: the calibration files in `calib/`.
 //! - [`logo`]: spin from the ball's printed logo in ceiling-camera crops.
 //! - [`stats`]: median / quantile summaries.
+//!
+//! `DESIGN §n` in these docs cites section n of `docs/design.md`.
 
 #![warn(missing_docs)]
 #![deny(unreachable_pub)]

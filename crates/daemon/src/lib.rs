@@ -19,6 +19,8 @@
 //! - [`tracker_check`]: what the tracker sends (`topspin check tracker`).
 //! - [`doctor`]: is this PC ready for the 4 ms loop (`topspin doctor`).
 //! - [`touch`]: the RSI listener that reads touch points (`topspin calibrate cell --rsi`).
+//!
+//! `DESIGN §n` in these docs cites section n of `docs/design.md`.
 
 pub mod calib_files;
 pub mod channels;

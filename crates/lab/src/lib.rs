@@ -8,6 +8,8 @@
 //! - [`data`]: the real MPI launcher recordings and the study on them.
 //! - [`logo`]: logo spin against ground truth, and the sources compared.
 //! - [`progress`]: progress bars and the worker pool of long runs.
+//!
+//! `DESIGN §n` in these docs cites section n of `docs/design.md`.
 
 pub mod data;
 pub mod eval;

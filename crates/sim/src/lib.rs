@@ -25,6 +25,8 @@
 //! from its own streams ([`ball_rngs`]), so ball k is the same whatever the
 //! number of balls or the tracker options. No clock, no I/O: the command
 //! line writes files and paces the live stream.
+//!
+//! `DESIGN §n` in these docs cites section n of `docs/design.md`.
 
 pub mod demo;
 pub mod faults;

@@ -128,7 +128,7 @@ fn every_tracker_fault_at_once_is_survived_and_counted_exactly() {
     assert!(r.reachable() > 0 && r.hits() > 0, "{}", summary(&r));
 }
 
-/// The measurement behind the README's virtual-cell numbers (not a check):
+/// The measurement behind docs/results.md's virtual-cell numbers (not a check):
 /// `SEEDS=1,2,3,4,5,7 BALLS=27 [CORRECTION=axis] [WORLD=real-launcher]
 /// [STROKES=human-rally] [LOGO=background|cnn] [AIM_TARGET=x,y]
 /// [AIM_PATTERN=x,y;x,y] [AIM_AWAY=1] cargo test --release --test virtual_cell --

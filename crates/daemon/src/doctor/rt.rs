@@ -21,7 +21,7 @@ pub const CAP_SYS_NICE: u32 = 23;
 /// What the unit gives the service (the fix when this process lacks it).
 const SERVICE_RIGHTS: &str = "the service gets them from deploy/topspin.service (AmbientCapabilities=CAP_SYS_NICE CAP_IPC_LOCK, \
 LimitRTPRIO=99, LimitMEMLOCK=infinity); to run by hand: /etc/security/limits.d/topspin.conf with `USER - rtprio 99` and \
-`USER - memlock unlimited`, or run doctor as the service runs (README, \"Is this PC ready?\")";
+`USER - memlock unlimited`, or run doctor as the service runs (docs/guide/doctor.md)";
 
 /// This process's effective capabilities (`CapEff`).
 pub(crate) fn cap_eff(host: &Host) -> Result<u64, String> {
