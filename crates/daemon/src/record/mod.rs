@@ -107,13 +107,13 @@ pub enum RecordError {
 
 /// The compiled-in calibration texts (the repository's `calib/`), in [`CALIB_FILES`] order.
 const DEFAULT_CALIB: [&str; 4] = [
-    include_str!("../../../../calib/physics.toml"),
-    include_str!("../../../../calib/table.toml"),
-    include_str!("../../../../calib/strike.toml"),
-    include_str!("../../../../calib/robot.toml"),
+    topspin_core::calib::DEFAULT_PHYSICS,
+    topspin_core::calib::DEFAULT_TABLE,
+    topspin_core::calib::DEFAULT_STRIKE,
+    topspin_core::calib::DEFAULT_ROBOT,
 ];
 
-/// The calibration texts `Calibration::load(dir)` reads: each of
+/// The calibration texts [`CalibDir::load`](crate::calib_files::CalibDir::load) reads: each of
 /// [`CALIB_FILES`] from `dir`, or the compiled-in one where `dir` is `None`
 /// or lacks it — the `calib_files` argument of [`Recorder::create`].
 pub fn calib_files(dir: Option<&std::path::Path>) -> Result<Vec<(String, String)>, RecordError> {
