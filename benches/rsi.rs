@@ -5,9 +5,10 @@
 use criterion::{Criterion, criterion_group, criterion_main};
 use std::hint::black_box;
 use topspin_core::calib::Calibration;
+use topspin_core::geometry::EulerZyx;
 use topspin_core::motion::MotionLimits;
 use topspin_core::physics::Vec3;
-use topspin_core::plan::{EulerZyx, StrikePlan};
+use topspin_core::plan::StrikePlan;
 use topspin_core::rsi::codec::{KukaPose, RobElement, RobFrame, SenFrame};
 use topspin_core::rsi::session::{Correction, MAX_ANSWER_LEN, RsiSession, SessionConfig};
 use topspin_core::time::Instant;

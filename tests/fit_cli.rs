@@ -1,5 +1,5 @@
 //! `topspin fit` end to end: a simulated flight in, the JSON of DESIGN §8
-//! out and checked against the ground truth; `--stream` over a multi-ball
+//! out and checked against the ground truth; `fit stream` over a multi-ball
 //! recording; exit code 2 with one line for every kind of unusable input.
 
 use std::path::{Path, PathBuf};
@@ -99,8 +99,11 @@ fn stream_prints_one_plan_per_ball() {
     let dir = temp_dir("stream");
     let status = Command::new(BIN).args(["sim", "--balls", "6", "--seed", "5", "--out"]).arg(&dir).output().unwrap();
     assert!(status.status.success());
-    let out = topspin(&["fit", "--stream", "--json"], &dir.join("stream.csv"));
+    let out = topspin(&["fit", "stream", "--json"], &dir.join("stream.csv"));
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    // The older spelling is the same command.
+    let older = topspin(&["fit", "--stream", "--json"], &dir.join("stream.csv"));
+    assert_eq!(older.stdout, out.stdout);
     let balls: Vec<serde_json::Value> = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(balls.len(), 6, "{balls:?}");
     let planned = balls.iter().filter(|b| !b["plan"].is_null()).count();

@@ -149,7 +149,7 @@ fn no_controller_is_a_failure_with_its_reason() {
 fn unusable_input_exits_2_with_one_line() {
     for (args, says) in [
         (vec!["--bind", "nonsense"], "--bind nonsense"),
-        (vec!["--axis", "w"], "--axis w"),
+        (vec!["--axis", "w"], "'w' for '--axis"),
         (vec!["--amplitude-mm", "50"], "amplitude 50 mm"),
         (vec!["--amplitude-mm", "abc"], "--amplitude-mm"),
         (vec!["--seconds", "1"], "1 s: must be within"),

@@ -96,6 +96,22 @@ fn rendered_folders_give_the_true_spin() {
 }
 
 #[test]
+fn eval_is_a_subcommand_and_the_older_flag_still_works() {
+    let args = ["--balls", "1", "--setting", "topspin-high", "--colour", "orange", "--frames", "10", "--json"];
+    let new = Command::new(BIN).args(["logo", "eval"]).args(args).output().unwrap();
+    assert!(new.status.success(), "{}", String::from_utf8_lossy(&new.stderr));
+    let rows: serde_json::Value = serde_json::from_slice(&new.stdout).unwrap();
+    assert!(!rows["balls"].as_array().unwrap().is_empty(), "{rows}");
+    let old = Command::new(BIN).args(["logo", "--eval"]).args(args).output().unwrap();
+    assert_eq!(old.stdout, new.stdout);
+    // A typed option names what it accepts.
+    let out = Command::new(BIN).args(["logo", "eval", "--colour", "green"]).output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(err.contains("orange") && err.lines().count() == 1, "{err}");
+}
+
+#[test]
 fn unusable_folders_exit_2_with_one_line() {
     let dir = temp_dir("bad");
     let check = |args: &[&str], needle: &str| {

@@ -11,7 +11,7 @@
 //! is not asserted here: on this shared machine some answers are late (the
 //! mock CLI keeps the controller's deadline), and a held-then-resumed
 //! correction is a velocity step the axes take through their lag — that is
-//! lateness, tested in tests/rsi_faults.rs, not a command out of bounds.
+//! lateness, tested in crates/sim/tests/rsi_faults.rs, not a command out of bounds.
 
 #![allow(clippy::disallowed_methods)] // a process test: it waits on the wall clock
 

@@ -19,7 +19,7 @@ use topspin_daemon::calib_files::CalibDir;
 
 use clap::{Args, Subcommand};
 
-use super::BadInput;
+use super::bad;
 use topspin_core::calib::Calibration;
 use topspin_core::calib::cell::{
     self, Bounds, CellFit, DEFAULT_MAX_RMS_M, DEFAULT_MAX_SPREAD_MM, DEFAULT_MAX_TILT_DEG, DEFAULT_MAX_WORST_M, Touch,
@@ -110,10 +110,6 @@ pub fn run(c: CalibrateCommand) -> anyhow::Result<()> {
     match c {
         CalibrateCommand::Cell(a) => cell_cmd(a),
     }
-}
-
-fn bad(s: impl Into<String>) -> anyhow::Error {
-    BadInput(s.into()).into()
 }
 
 fn cell_cmd(a: CellArgs) -> anyhow::Result<()> {

@@ -113,10 +113,10 @@ pub fn run_paper(a: EvalPaperArgs) -> anyhow::Result<()> {
     if !(a.noise_mm.is_finite() && a.noise_mm > 0.0) {
         return Err(BadInput(format!("--noise-mm {} must be positive", a.noise_mm)).into());
     }
-    if a.flights < 2 || a.bounce_balls < 1 || a.frames < topspin_lab::logo::eval::MIN_FRAMES {
+    if a.flights < 2 || a.bounce_balls < 1 || a.frames < topspin_sim::render::MIN_FILMED_FRAMES {
         return Err(BadInput(format!(
             "need --flights ≥ 2, --bounce-balls ≥ 1 and --frames ≥ {}",
-            topspin_lab::logo::eval::MIN_FRAMES
+            topspin_sim::render::MIN_FILMED_FRAMES
         ))
         .into());
     }

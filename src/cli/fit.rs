@@ -1,9 +1,12 @@
-//! `topspin fit FILE`: spin and prediction for one recorded flight (DESIGN §8).
+//! `topspin fit FILE`: spin and prediction for one recorded flight;
+//! `topspin fit stream FILE`: the streaming estimator over a recording of
+//! many balls (DESIGN §8). The older spelling `fit --stream FILE` still
+//! works.
 
 use std::path::{Path, PathBuf};
 use topspin_daemon::calib_files::CalibDir;
 
-use clap::{Args, ValueEnum};
+use clap::{Args, Subcommand, ValueEnum};
 use serde_json::{Value, json};
 
 use super::BadInput;
@@ -30,9 +33,37 @@ pub enum MethodChoice {
 }
 
 #[derive(Debug, Args)]
+#[command(args_conflicts_with_subcommands = true, subcommand_negates_reqs = true)]
 pub struct FitArgs {
+    #[command(subcommand)]
+    pub command: Option<FitCommand>,
     /// CSV with header `t,x,y,z` (s, m, table frame; extra columns ignored).
-    pub file: PathBuf,
+    #[arg(required = true)]
+    pub file: Option<PathBuf>,
+    #[command(flatten)]
+    pub opts: FitOptions,
+    /// The older spelling of `topspin fit stream FILE`.
+    #[arg(long, hide = true)]
+    pub stream: bool,
+}
+
+/// `topspin fit stream`.
+#[derive(Debug, Subcommand)]
+pub enum FitCommand {
+    /// The streaming estimator over a recording of many balls (e.g.
+    /// `topspin sim`'s stream.csv): one plan per ball.
+    Stream {
+        /// CSV with header `t,x,y,z` (s, m, table frame; extra columns
+        /// ignored).
+        file: PathBuf,
+        #[command(flatten)]
+        opts: FitOptions,
+    },
+}
+
+/// What both modes take.
+#[derive(Debug, Args)]
+pub struct FitOptions {
     /// Print one JSON object instead of a summary.
     #[arg(long)]
     pub json: bool,
@@ -51,10 +82,6 @@ pub struct FitArgs {
     /// The tracker's per-axis noise in mm (sets the outlier thresholds).
     #[arg(long, default_value_t = 2.0, value_name = "MM")]
     pub noise_mm: f64,
-    /// FILE is a recording of many balls (e.g. `topspin sim`'s stream.csv):
-    /// run the streaming estimator over it and print one plan per ball.
-    #[arg(long)]
-    pub stream: bool,
 }
 
 /// Reads a `t,x,y,z` CSV (extra columns ignored).
@@ -111,6 +138,10 @@ pub fn load_calibration(dir: Option<&Path>, physics: PhysicsChoice) -> Result<Ca
 }
 
 pub fn run(args: FitArgs) -> anyhow::Result<()> {
+    let (file, args, stream) = match args.command {
+        Some(FitCommand::Stream { file, opts }) => (file, opts, true),
+        None => (args.file.expect("clap requires FILE without a subcommand"), args.opts, args.stream),
+    };
     let cal = load_calibration(args.calib.as_deref(), args.physics)?;
     let hit_plane_x = args.hit_plane_x.unwrap_or(cal.strike.hit_plane_x);
     if !hit_plane_x.is_finite() {
@@ -119,8 +150,8 @@ pub fn run(args: FitArgs) -> anyhow::Result<()> {
     if !(args.noise_mm.is_finite() && args.noise_mm > 0.0) {
         return Err(BadInput("--noise-mm must be positive".into()).into());
     }
-    let samples = read_samples(&args.file)?;
-    if args.stream {
+    let samples = read_samples(&file)?;
+    if stream {
         return super::replay_stream::run(&samples, &cal, hit_plane_x, args.noise_mm * 1e-3, args.json);
     }
     let method = match args.method {
@@ -129,8 +160,8 @@ pub fn run(args: FitArgs) -> anyhow::Result<()> {
     };
     let cfg =
         FitConfig::new(method, hit_plane_x).with_noise(args.noise_mm * 1e-3).with_variation(cal.physics.variation);
-    let fit = fit_trajectory(&samples, &cal.propagator(), &cfg)
-        .map_err(|e| BadInput(format!("{}: {e}", args.file.display())))?;
+    let fit =
+        fit_trajectory(&samples, &cal.propagator(), &cfg).map_err(|e| BadInput(format!("{}: {e}", file.display())))?;
     if args.json {
         println!("{}", to_json(&fit, hit_plane_x));
     } else {

@@ -37,9 +37,9 @@ pub struct IdentifyArgs {
     /// Largest correction on the moving axis, mm (0.5 to 10).
     #[arg(long, default_value_t = excitation::DEFAULT_AMPLITUDE_MM)]
     pub amplitude_mm: f64,
-    /// Axis to excite in BASE: x, y, z, or all (one after the other).
-    #[arg(long, default_value = "all")]
-    pub axis: String,
+    /// Axis to excite in BASE (`all`: one after the other).
+    #[arg(long, value_enum, default_value_t = AxisArg::All)]
+    pub axis: AxisArg,
     /// Length of the excitation, s (split between the axes).
     #[arg(long, default_value_t = 12.0)]
     pub seconds: f64,
@@ -107,13 +107,36 @@ struct ServoNow {
     lag_ms: f64,
 }
 
-fn parse_axis(s: &str) -> Result<AxisChoice, BadInput> {
-    match s.to_ascii_lowercase().as_str() {
-        "x" => Ok(AxisChoice::X),
-        "y" => Ok(AxisChoice::Y),
-        "z" => Ok(AxisChoice::Z),
-        "all" => Ok(AxisChoice::All),
-        _ => Err(BadInput(format!("--axis {s}: must be x, y, z or all"))),
+/// `--axis x|y|z|all`.
+#[derive(Copy, Clone, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum AxisArg {
+    /// BASE x.
+    X,
+    /// BASE y.
+    Y,
+    /// BASE z.
+    Z,
+    /// x, y and z, one after the other.
+    All,
+}
+
+impl AxisArg {
+    fn choice(self) -> AxisChoice {
+        match self {
+            AxisArg::X => AxisChoice::X,
+            AxisArg::Y => AxisChoice::Y,
+            AxisArg::Z => AxisChoice::Z,
+            AxisArg::All => AxisChoice::All,
+        }
+    }
+
+    fn name(self) -> &'static str {
+        match self {
+            AxisArg::X => "x",
+            AxisArg::Y => "y",
+            AxisArg::Z => "z",
+            AxisArg::All => "all",
+        }
     }
 }
 
@@ -132,7 +155,7 @@ fn calib_toml(r: &Identification) -> String {
 
 /// Runs `topspin identify`.
 pub fn run(a: IdentifyArgs) -> anyhow::Result<()> {
-    let axes = parse_axis(&a.axis)?;
+    let axes = a.axis.choice();
     positive("--wait-s", a.wait_s)?;
     positive("--hold-s", a.hold_s)?;
     let cfg = DaemonConfig::load(a.config.as_deref()).map_err(|e| BadInput(e.to_string()))?;
@@ -175,7 +198,9 @@ pub fn run(a: IdentifyArgs) -> anyhow::Result<()> {
     let seconds = id.excitation().len() as f64 * cycle_ms as f64 * 1e-3;
     eprintln!(
         "identify: waiting up to {} s for the controller on {bind} ({} ±{} mm, {seconds:.1} s)",
-        a.wait_s, a.axis, a.amplitude_mm
+        a.wait_s,
+        a.axis.name(),
+        a.amplitude_mm
     );
     let outcome = rsi_identify::run(&socket, &mut id, &loop_cfg, |p| match p {
         Progress::Started(from) => eprintln!("identify: controller {from}: exciting"),
@@ -244,7 +269,7 @@ fn base_report(a: &IdentifyArgs, id: &Identifier, o: &LoopOutcome, cycle_ms: u32
         malformed: s.malformed,
         foreign: o.foreign,
         max_answer_latency_us: s.max_latency.0 / 1000,
-        axes: a.axis.to_ascii_lowercase(),
+        axes: a.axis.name().to_owned(),
         amplitude_mm: a.amplitude_mm,
         seconds: id.excitation().len() as f64 * cycle_ms as f64 * 1e-3,
         ended: match o.end {
@@ -294,7 +319,12 @@ fn text(a: &IdentifyArgs, r: &Identification) -> String {
     let _ = writeln!(
         s,
         "topspin identify: {} cycles of {} ms ({} ±{} mm), {} without RIst, {} answers not applied (late)",
-        r.cycles, r.cycle_ms, a.axis, a.amplitude_mm, r.gaps, r.late
+        r.cycles,
+        r.cycle_ms,
+        a.axis.name(),
+        a.amplitude_mm,
+        r.gaps,
+        r.late
     );
     let ratio = if f.runner_up_ratio.is_finite() { format!("{:.2}×", f.runner_up_ratio) } else { "∞×".to_owned() };
     let _ = writeln!(

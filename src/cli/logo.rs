@@ -1,7 +1,8 @@
 //! `topspin logo FOLDER [--json]`: spin from a sequence of ball crops;
-//! `topspin logo --eval`: the background method's accuracy on rendered
-//! sequences; `--cnn-eval DIR` and `--compare`: the CNN's metrics and the
-//! spin sources side by side (see [`super::logo_cnn`]).
+//! `topspin logo eval`: the background methods' accuracy on rendered
+//! sequences; `logo cnn-eval DIR` and `logo compare`: the CNN's metrics and
+//! the spin sources side by side (see [`super::logo_cnn`]). The older
+//! spellings `--eval`, `--compare` and `--cnn-eval DIR` still work.
 //!
 //! The folder holds the crops as PNG (RGB8 or RGBA8) and a `frames.csv`
 //! with at least the columns `file,t,u,v,radius` (extra columns ignored):
@@ -16,120 +17,184 @@ use topspin_daemon::calib_files::CalibDir;
 
 use serde_json::json;
 
+use super::args::{Colours, GapRuleChoice, LogoMethodChoice, Settings};
 use super::crops::read_folder;
-use super::{BadInput, logo_cnn};
+use super::{bad, logo_cnn};
 use topspin_core::calib::Calibration;
 use topspin_core::calib::camera::CameraCalib;
-use topspin_core::logo::pipeline::{CropInput, LogoMethod, process_sequence};
-use topspin_core::logo::{CropImage, DetectorConfig, GapRule, RotationFitConfig};
+use topspin_core::logo::pipeline::{CropInput, process_sequence};
+use topspin_core::logo::{CropImage, DetectorConfig, RotationFitConfig};
 use topspin_core::physics::rad_to_rps;
 use topspin_lab::logo::eval::{self, BallEval, EvalOptions, Row};
-use topspin_sim::Setting;
-use topspin_sim::render::BallColour;
+use topspin_sim::render::MIN_FILMED_FRAMES;
 
 #[derive(Debug, clap::Args)]
+#[command(args_conflicts_with_subcommands = true, subcommand_negates_reqs = true)]
 pub struct LogoArgs {
+    #[command(subcommand)]
+    pub command: Option<LogoCommand>,
     /// Folder with frames.csv (file,t,u,v,radius) and the PNG crops.
     #[arg(required_unless_present_any = ["eval", "compare", "cnn_eval"])]
     pub folder: Option<PathBuf>,
     /// Print one JSON object.
     #[arg(long)]
     pub json: bool,
-    /// Evaluate on rendered sequences instead (no FOLDER).
-    #[arg(long, conflicts_with_all = ["folder", "compare", "cnn_eval"])]
-    pub eval: bool,
-    /// Compare the trajectory's, the logo's (background, CNN) and the fused
-    /// spins on the same simulated flights (no FOLDER).
-    #[arg(long, conflicts_with_all = ["folder", "cnn_eval"])]
-    pub compare: bool,
-    /// The CNN's metrics and speed on a `topspin render --out` folder.
-    #[arg(long, value_name = "DIR", conflicts_with = "folder")]
-    pub cnn_eval: Option<PathBuf>,
+    #[command(flatten)]
+    pub fit: FitOptions,
     #[command(flatten)]
     pub cnn: logo_cnn::CnnArgs,
-    /// --compare: leave the CNN out.
-    #[arg(long)]
+    /// Calibration folder (camera.toml).
+    #[arg(long, value_name = "DIR")]
+    pub calib: Option<PathBuf>,
+    /// The older spelling of `topspin logo eval`.
+    #[arg(long, hide = true, conflicts_with_all = ["folder", "compare", "cnn_eval"])]
+    pub eval: bool,
+    /// The older spelling of `topspin logo compare`.
+    #[arg(long, hide = true, conflicts_with_all = ["folder", "cnn_eval"])]
+    pub compare: bool,
+    /// The older spelling of `topspin logo cnn-eval DIR`.
+    #[arg(long, hide = true, value_name = "DIR", conflicts_with = "folder")]
+    pub cnn_eval: Option<PathBuf>,
+    /// With the older spellings: leave the CNN out of the comparison.
+    #[arg(long, hide = true)]
     pub no_cnn: bool,
-    /// --eval: filmed balls per setting and colour.
+    /// With the older spellings: the rendered flights.
+    #[command(flatten, next_help_heading = None)]
+    pub rendered: Rendered,
+}
+
+/// `topspin logo eval | compare | cnn-eval`.
+#[derive(Debug, clap::Subcommand)]
+pub enum LogoCommand {
+    /// The background methods' accuracy on rendered sequences.
+    Eval(EvalArgs),
+    /// The trajectory's, the logo's (background, CNN) and the fused spins
+    /// on the same simulated flights.
+    Compare(CompareArgs),
+    /// The CNN's metrics and speed on a `topspin render --out` folder.
+    CnnEval(CnnEvalArgs),
+}
+
+/// How the logo's positions become a spin.
+#[derive(Debug, clap::Args)]
+pub struct FitOptions {
+    /// Where the logo's centre is taken from.
+    #[arg(long, value_enum, default_value_t = LogoMethodChoice::Segment)]
+    pub method: LogoMethodChoice,
+    /// How gaps of two or more unseen frames are bridged.
+    #[arg(long, value_enum, default_value_t = GapRuleChoice::Directed)]
+    pub gap_rule: GapRuleChoice,
+}
+
+/// The rendered flights an evaluation runs on.
+#[derive(Debug, clap::Args)]
+pub struct Rendered {
+    /// Filmed balls per setting and colour.
     #[arg(long, default_value_t = 6)]
     pub balls: usize,
-    /// --eval: seed of the simulated and rendered balls.
+    /// Seed of the simulated and rendered balls.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// --eval: `all` or comma-separated launcher settings.
+    /// `all` or comma-separated launcher settings.
     #[arg(long, default_value = "all")]
-    pub setting: String,
-    /// --eval: orange, white or both.
-    #[arg(long, default_value = "both")]
-    pub colour: String,
-    /// --eval: frames per ball.
+    pub setting: Settings,
+    /// Ball colours (`compare`: the first of them).
+    #[arg(long, value_enum, default_value_t = Colours::Both)]
+    pub colour: Colours,
+    /// Frames per ball.
     #[arg(long, default_value_t = 20)]
     pub frames: usize,
-    /// Logo centre: centroid (paper, uncorrected), segment (paper with the
-    /// circular-segment correction), weighted (area-weighted + segment) or
-    /// cnn (the network of --model).
-    #[arg(long, default_value = "segment")]
-    pub method: String,
-    /// Gaps of two or more unseen frames: paper (the large angle) or
-    /// directed (angle in the rotation's direction plus predicted turns).
-    #[arg(long, default_value = "directed")]
-    pub gap_rule: String,
-    /// Calibration folder (camera.toml; the others for --eval).
+}
+
+impl Rendered {
+    fn check(&self) -> anyhow::Result<()> {
+        if self.balls == 0 || self.frames < MIN_FILMED_FRAMES {
+            return Err(bad(format!("--balls must be ≥ 1 and --frames ≥ {MIN_FILMED_FRAMES}")));
+        }
+        Ok(())
+    }
+}
+
+#[derive(Debug, clap::Args)]
+pub struct EvalArgs {
+    #[command(flatten)]
+    pub rendered: Rendered,
+    /// How gaps of two or more unseen frames are bridged.
+    #[arg(long, value_enum, default_value_t = GapRuleChoice::Directed)]
+    pub gap_rule: GapRuleChoice,
+    /// Print one JSON object.
+    #[arg(long)]
+    pub json: bool,
+    /// Calibration folder.
     #[arg(long, value_name = "DIR")]
     pub calib: Option<PathBuf>,
 }
 
-fn bad(msg: impl Into<String>) -> anyhow::Error {
-    BadInput(msg.into()).into()
+#[derive(Debug, clap::Args)]
+pub struct CompareArgs {
+    #[command(flatten)]
+    pub rendered: Rendered,
+    #[command(flatten)]
+    pub cnn: logo_cnn::CnnArgs,
+    /// Leave the CNN out.
+    #[arg(long)]
+    pub no_cnn: bool,
+    /// Print one JSON object.
+    #[arg(long)]
+    pub json: bool,
+    /// Calibration folder.
+    #[arg(long, value_name = "DIR")]
+    pub calib: Option<PathBuf>,
 }
 
-fn parse_method(s: &str) -> Result<LogoMethod, BadInput> {
-    LogoMethod::ALL
-        .into_iter()
-        .find(|m| m.name() == s)
-        .ok_or_else(|| BadInput(format!("--method `{s}`: expected centroid, segment, weighted or cnn")))
+#[derive(Debug, clap::Args)]
+pub struct CnnEvalArgs {
+    /// A `topspin render --out` folder.
+    pub dir: PathBuf,
+    #[command(flatten)]
+    pub cnn: logo_cnn::CnnArgs,
+    /// Print one JSON object.
+    #[arg(long)]
+    pub json: bool,
 }
 
-fn parse_gap_rule(s: &str) -> Result<GapRule, BadInput> {
-    match s {
-        "paper" => Ok(GapRule::Paper),
-        "directed" => Ok(GapRule::Directed),
-        _ => Err(BadInput(format!("--gap-rule `{s}`: expected paper or directed"))),
+/// What `topspin logo` was asked for.
+enum Mode {
+    Folder { folder: PathBuf, json: bool, fit: FitOptions, cnn: logo_cnn::CnnArgs, calib: Option<PathBuf> },
+    Command(LogoCommand),
+}
+
+impl LogoArgs {
+    /// The mode, with the older flag spellings read as their subcommands.
+    fn mode(self) -> Mode {
+        let LogoArgs { command, folder, json, fit, cnn, calib, eval, compare, cnn_eval, no_cnn, rendered } = self;
+        let command = match (command, cnn_eval) {
+            (Some(c), _) => c,
+            (None, Some(dir)) => LogoCommand::CnnEval(CnnEvalArgs { dir, cnn, json }),
+            (None, None) if compare => LogoCommand::Compare(CompareArgs { rendered, cnn, no_cnn, json, calib }),
+            (None, None) if eval => LogoCommand::Eval(EvalArgs { rendered, gap_rule: fit.gap_rule, json, calib }),
+            (None, None) => {
+                let folder = folder.expect("clap requires FOLDER without a subcommand");
+                return Mode::Folder { folder, json, fit, cnn, calib };
+            }
+        };
+        Mode::Command(command)
     }
 }
 
 pub fn run(a: LogoArgs) -> anyhow::Result<()> {
-    let cam = CameraCalib::load(a.calib.as_deref()).map_err(|e| bad(e.to_string()))?;
-    let fit_cfg = RotationFitConfig { gap_rule: parse_gap_rule(&a.gap_rule)?, ..RotationFitConfig::default() };
-    if let Some(dir) = &a.cnn_eval {
-        let mut net = a.cnn.load()?;
-        return logo_cnn::run_cnn_eval(dir, &mut net, a.json);
-    }
-    if a.compare {
-        if a.balls == 0 || a.frames < eval::MIN_FRAMES {
-            return Err(bad(format!("--balls must be ≥ 1 and --frames ≥ {}", eval::MIN_FRAMES)));
-        }
-        let colour = match parse_colours(&a.colour)?.as_slice() {
-            [c] => *c,
-            _ => BallColour::Orange,
-        };
-        let opts = logo_cnn::compare_options(a.seed, a.balls, parse_settings(&a.setting)?, colour, a.frames);
-        let mut net = if a.no_cnn { None } else { Some(a.cnn.load()?) };
-        return logo_cnn::run_compare(a.calib.as_deref(), &cam, &opts, net.as_mut(), a.json);
-    }
-    if a.method == "cnn" {
-        let Some(folder) = a.folder.as_deref() else {
-            return Err(bad("FOLDER is required with --method cnn"));
-        };
-        let mut net = a.cnn.load()?;
-        return logo_cnn::run_folder(folder, &read_folder(folder)?, &cam, &fit_cfg, &mut net, a.json);
-    }
-    let method = parse_method(&a.method)?;
-    if a.eval {
-        return run_eval(&a, &cam, fit_cfg);
-    }
-    let Some(folder) = a.folder.as_deref() else {
-        return Err(bad("FOLDER is required without --eval"));
+    let (folder, json, fit, cnn, calib) = match a.mode() {
+        Mode::Command(LogoCommand::CnnEval(c)) => return logo_cnn::run_cnn_eval(&c.dir, &mut c.cnn.load()?, c.json),
+        Mode::Command(LogoCommand::Compare(c)) => return run_compare(c),
+        Mode::Command(LogoCommand::Eval(e)) => return run_eval(e),
+        Mode::Folder { folder, json, fit, cnn, calib } => (folder, json, fit, cnn, calib),
+    };
+    let folder = folder.as_path();
+    let cam = CameraCalib::load(calib.as_deref()).map_err(|e| bad(e.to_string()))?;
+    let fit_cfg = RotationFitConfig { gap_rule: fit.gap_rule.into(), ..RotationFitConfig::default() };
+    let Some(method) = fit.method.background() else {
+        let mut net = cnn.load()?;
+        return logo_cnn::run_folder(folder, &read_folder(folder)?, &cam, &fit_cfg, &mut net, json);
     };
     let frames = read_folder(folder)?;
     let inputs: Vec<CropInput<'_>> = frames
@@ -146,7 +211,7 @@ pub fn run(a: LogoArgs) -> anyhow::Result<()> {
     let seen = r.measurements.iter().filter(|m| m.is_some()).count();
     let fit = r.fit.map_err(|e| bad(format!("{}: {e}", folder.display())))?;
     let w = fit.spin;
-    if a.json {
+    if json {
         let v = json!({
             "spin": [w.x, w.y, w.z],
             "spin_rps": [rad_to_rps(w.x), rad_to_rps(w.y), rad_to_rps(w.z)],
@@ -179,35 +244,31 @@ pub fn run(a: LogoArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn parse_settings(s: &str) -> Result<Vec<Setting>, BadInput> {
-    if s.trim().eq_ignore_ascii_case("all") {
-        return Ok(Setting::ALL.to_vec());
-    }
-    s.split(',').map(|n| n.parse::<Setting>().map_err(|e| BadInput(e.to_string()))).collect()
+fn run_compare(c: CompareArgs) -> anyhow::Result<()> {
+    c.rendered.check()?;
+    let cam = CameraCalib::load(c.calib.as_deref()).map_err(|e| bad(e.to_string()))?;
+    let r = &c.rendered;
+    let colour = c.rendered.colour.list()[0];
+    let opts = logo_cnn::compare_options(r.seed, r.balls, r.setting.0.clone(), colour, r.frames);
+    let mut net = if c.no_cnn { None } else { Some(c.cnn.load()?) };
+    logo_cnn::run_compare(c.calib.as_deref(), &cam, &opts, net.as_mut(), c.json)
 }
 
-/// `--colour orange|white|both`.
-pub fn parse_colours(s: &str) -> Result<Vec<BallColour>, BadInput> {
-    if s.trim().eq_ignore_ascii_case("both") {
-        return Ok(BallColour::ALL.to_vec());
-    }
-    Ok(vec![s.parse::<BallColour>().map_err(BadInput)?])
-}
-
-fn run_eval(a: &LogoArgs, cam: &CameraCalib, fit: RotationFitConfig) -> anyhow::Result<()> {
+fn run_eval(a: EvalArgs) -> anyhow::Result<()> {
+    a.rendered.check()?;
+    let cam = CameraCalib::load(a.calib.as_deref()).map_err(|e| bad(e.to_string()))?;
     let cal = Calibration::load(a.calib.as_deref()).map_err(|e| bad(e.to_string()))?;
-    if a.balls == 0 || a.frames < eval::MIN_FRAMES {
-        return Err(bad(format!("--balls must be ≥ 1 and --frames ≥ {}", eval::MIN_FRAMES)));
-    }
+    let r = &a.rendered;
     let opts = EvalOptions {
-        seed: a.seed,
-        balls: a.balls,
-        frames: a.frames,
-        settings: parse_settings(&a.setting)?,
-        colours: parse_colours(&a.colour)?,
-        max_tries: 8 * a.balls + 8,
-        fit,
+        seed: r.seed,
+        balls: r.balls,
+        frames: r.frames,
+        settings: r.setting.0.clone(),
+        colours: r.colour.list(),
+        max_tries: 8 * r.balls + 8,
+        fit: RotationFitConfig { gap_rule: a.gap_rule.into(), ..RotationFitConfig::default() },
     };
+    let cam = &cam;
     let balls = eval::evaluate(&cal, cam, &opts);
     let mut rows = Vec::new();
     for s in &opts.settings {

@@ -1,11 +1,11 @@
 //! The CNN's parts of `topspin logo`:
 //!
-//! - `--cnn-eval DIR`: the network's metrics (paper §III) on a folder of
+//! - `cnn-eval DIR`: the network's metrics (paper §III) on a folder of
 //!   `topspin render --out` (its `labels.csv`), inferred here through `ort`
 //!   on the chosen backend: visibility classification accuracy, geodesic
 //!   error of the orientation and vector angle of the logo (on crops whose
 //!   logo faces the camera), and the time per crop and per batch of 5.
-//! - `--compare`: trajectory, background, CNN and fused spins on the same
+//! - `compare`: trajectory, background, CNN and fused spins on the same
 //!   simulated flights ([`topspin_lab::logo::compare`]).
 
 use std::fmt::Write as _;
@@ -14,7 +14,7 @@ use topspin_daemon::calib_files::CalibDir;
 
 use serde_json::json;
 
-use super::BadInput;
+use super::bad;
 use super::crops::{FolderFrame, read_png};
 use topspin_cnn::{self as cnn, CnnOutput, LogoCnn};
 use topspin_core::calib::Calibration;
@@ -26,10 +26,6 @@ use topspin_core::stats::Summary;
 use topspin_lab::logo::compare::{self, CompareBall, CompareOptions, CompareRow, SOURCES};
 use topspin_sim::Setting;
 use topspin_sim::render::BallColour;
-
-fn bad(msg: impl Into<String>) -> anyhow::Error {
-    BadInput(msg.into()).into()
-}
 
 /// The CNN's model and backend on the command line (`logo`, `demo`,
 /// `eval paper`).
@@ -96,7 +92,7 @@ fn median_ms(mut xs: Vec<f64>) -> f64 {
     xs.get(xs.len() / 2).copied().unwrap_or(f64::NAN) * 1e3
 }
 
-/// `topspin logo --cnn-eval DIR`.
+/// `topspin logo cnn-eval DIR`.
 pub fn run_cnn_eval(dir: &Path, net: &mut LogoCnn, as_json: bool) -> anyhow::Result<()> {
     let data = read_labels(dir)?;
     let crops: Vec<&[u8]> = data.iter().map(|d| d.rgb.as_slice()).collect();
@@ -165,7 +161,7 @@ pub fn run_cnn_eval(dir: &Path, net: &mut LogoCnn, as_json: bool) -> anyhow::Res
     Ok(())
 }
 
-/// `topspin logo --compare`.
+/// `topspin logo compare`.
 pub fn run_compare(
     cal_dir: Option<&Path>,
     cam: &CameraCalib,
@@ -190,7 +186,7 @@ pub fn run_compare(
     Ok(())
 }
 
-/// The Markdown table of `--compare`: median |ω̂ − ω| in rps per source,
+/// The Markdown table of `compare`: median |ω̂ − ω| in rps per source,
 /// with the share of balls each answered.
 pub fn compare_table(rows: &[CompareRow]) -> String {
     let mut s = String::new();
@@ -219,7 +215,7 @@ pub fn compare_table(rows: &[CompareRow]) -> String {
     s
 }
 
-/// Options of `--compare` from the flags.
+/// Options of `compare` from the flags.
 pub fn compare_options(
     seed: u64,
     balls: usize,

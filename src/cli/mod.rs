@@ -4,6 +4,7 @@
 
 use clap::{Parser, Subcommand};
 
+pub mod args;
 pub mod bench;
 pub mod bench_layout;
 pub mod calibrate;
@@ -32,6 +33,11 @@ pub const EXIT_BAD_INPUT: i32 = 2;
 #[derive(Debug, thiserror::Error)]
 #[error("{0}")]
 pub struct BadInput(pub String);
+
+/// A [`BadInput`] as the error a subcommand returns.
+pub(crate) fn bad(msg: impl Into<String>) -> anyhow::Error {
+    BadInput(msg.into()).into()
+}
 
 #[derive(Debug, Parser)]
 #[command(name = "topspin", version, about = "Table-tennis robot controller that reads and answers spin")]
@@ -70,7 +76,7 @@ pub enum Command {
     /// labels, and/or a live TTI1 stream.
     Render(render::RenderArgs),
     /// Spin from a sequence of ball crops (the logo, background
-    /// subtraction), or `--eval` on rendered sequences.
+    /// subtraction), or `logo eval` on rendered sequences.
     Logo(logo::LogoArgs),
     /// Re-run a recorded session (MCAP) and compare its plans bit for bit.
     Replay(replay::ReplayArgs),

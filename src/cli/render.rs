@@ -27,17 +27,17 @@ use topspin_daemon::calib_files::CalibDir;
 
 use serde_json::json;
 
-use super::BadInput;
-use super::logo::parse_colours;
+use super::args::{Colours, Settings};
+use super::bad;
 use topspin_core::calib::Calibration;
 use topspin_core::calib::camera::CameraCalib;
 use topspin_core::logo::BallView;
 use topspin_core::physics::{Vec3, rad_to_rps};
 use topspin_core::time::Instant;
 use topspin_core::wire::crop::{CROP_MAX_LEN, Crop};
-use topspin_lab::logo::eval::MIN_FRAMES;
+use topspin_sim::render::MIN_FILMED_FRAMES;
 use topspin_sim::render::{Conditions, Frame, Scene, Sequence, SequenceOptions, render_sequence};
-use topspin_sim::{Setting, TrackerModel, simulate_ball};
+use topspin_sim::{TrackerModel, simulate_ball};
 
 /// Where the live stream's capture clock starts before the first ball, s.
 pub const STREAM_LEAD: f64 = 0.2;
@@ -65,10 +65,10 @@ pub struct RenderArgs {
     /// `all`, or comma-separated launcher settings; ball k takes setting
     /// k mod their number.
     #[arg(long, default_value = "all")]
-    pub setting: String,
-    /// orange, white or both.
-    #[arg(long, default_value = "orange")]
-    pub colour: String,
+    pub setting: Settings,
+    /// Ball colours.
+    #[arg(long, value_enum, default_value_t = Colours::Orange)]
+    pub colour: Colours,
     /// Consecutive frames per ball (before the bounce, inside the ROI).
     #[arg(long, default_value_t = 20)]
     pub frames_per_ball: usize,
@@ -97,24 +97,13 @@ impl ConditionsArg {
     }
 }
 
-fn bad(msg: impl Into<String>) -> anyhow::Error {
-    BadInput(msg.into()).into()
-}
-
 pub fn run(a: RenderArgs) -> anyhow::Result<()> {
     let cal = Calibration::load(a.calib.as_deref()).map_err(|e| bad(e.to_string()))?;
     let cam = CameraCalib::load(a.calib.as_deref()).map_err(|e| bad(e.to_string()))?;
-    let settings: Vec<Setting> = if a.setting.trim().eq_ignore_ascii_case("all") {
-        Setting::ALL.to_vec()
-    } else {
-        a.setting
-            .split(',')
-            .map(|n| n.parse::<Setting>().map_err(|e| BadInput(e.to_string())))
-            .collect::<Result<_, _>>()?
-    };
-    let colours = parse_colours(&a.colour)?;
-    if a.frames_per_ball < MIN_FRAMES || a.frames_per_ball > 1000 {
-        return Err(bad(format!("--frames-per-ball {} must be in {MIN_FRAMES}..=1000", a.frames_per_ball)));
+    let settings = a.setting.0.clone();
+    let colours = a.colour.list();
+    if a.frames_per_ball < MIN_FILMED_FRAMES || a.frames_per_ball > 1000 {
+        return Err(bad(format!("--frames-per-ball {} must be in {MIN_FILMED_FRAMES}..=1000", a.frames_per_ball)));
     }
     let prop = cal.propagator();
     let mut sequences = Vec::new();
@@ -128,7 +117,7 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
                 .map_err(|e| bad(e.to_string()))?;
             let seq =
                 render_sequence(&scene, &ball.truth, &prop, a.seed, k, &SequenceOptions { frames: a.frames_per_ball });
-            if seq.frames.len() >= MIN_FRAMES {
+            if seq.frames.len() >= MIN_FILMED_FRAMES {
                 println!(
                     "ball {k:03} {:<6} {:<15} {:2} frames, spin {:5.1} rps, logo seen (truth) in {}",
                     colour.name(),

@@ -1,4 +1,4 @@
-//! `topspin fit --stream FILE`: the streaming estimator over a recording of
+//! `topspin fit stream FILE`: the streaming estimator over a recording of
 //! many balls, one line (or JSON object) per ball with its last plan.
 
 use serde_json::json;

@@ -14,7 +14,9 @@ use topspin_daemon::calib_files::CalibDir;
 use anyhow::Context as _;
 use serde::Serialize;
 
-use super::BadInput;
+use super::args::Settings;
+use super::bad;
+use super::fit::PhysicsChoice;
 use topspin_core::calib::Calibration;
 use topspin_sim::{self as sim, Setting, SimBall, TrackerModel, Truth};
 
@@ -54,7 +56,7 @@ pub struct SimOptions {
     /// `all`, or one or more comma-separated settings (backspin-low, …,
     /// topspin-high); ball k takes setting k mod their number.
     #[arg(long, default_value = "all")]
-    pub setting: String,
+    pub setting: Settings,
     /// Where the balls come from: `launcher` (the settings above),
     /// `aimed-launcher` (the same, every ball aimed through the hitting
     /// volume's window), or real human strokes measured right after the
@@ -76,27 +78,15 @@ pub struct SimOptions {
     /// Tracker latency (capture to arrival) for the live stream, ms.
     #[arg(long, default_value_t = 5.0, allow_negative_numbers = true)]
     pub latency_ms: f64,
-    /// `calibrated` (calib/) or `paper` (the paper's constant coefficients).
-    #[arg(long, default_value = "calibrated")]
-    pub physics: String,
+    /// Physics coefficients.
+    #[arg(long, value_enum, default_value_t = PhysicsChoice::Calibrated)]
+    pub physics: PhysicsChoice,
     /// Calibration folder instead of the compiled-in one.
     #[arg(long, value_name = "DIR")]
     pub calib: Option<PathBuf>,
     /// Seconds between launches (longer where a flight needs it).
     #[arg(long, default_value_t = 1.5, allow_negative_numbers = true)]
     pub gap: f64,
-}
-
-/// The settings named by `--setting`.
-fn parse_settings(s: &str) -> Result<Vec<Setting>, BadInput> {
-    if s.trim().eq_ignore_ascii_case("all") {
-        return Ok(Setting::ALL.to_vec());
-    }
-    s.split(',').map(|n| n.parse::<Setting>().map_err(|e| BadInput(e.to_string()))).collect()
-}
-
-fn bad(msg: impl Into<String>) -> anyhow::Error {
-    BadInput(msg.into()).into()
 }
 
 /// The validated options.
@@ -107,7 +97,7 @@ struct Plan {
 }
 
 fn plan(a: &SimOptions) -> anyhow::Result<Plan> {
-    let settings = parse_settings(&a.setting)?;
+    let settings = a.setting.0.clone();
     if !(a.noise_mm.is_finite() && a.noise_mm >= 0.0) {
         return Err(bad(format!("--noise-mm {} must be ≥ 0", a.noise_mm)));
     }
@@ -124,12 +114,9 @@ fn plan(a: &SimOptions) -> anyhow::Result<Plan> {
         return Err(bad(format!("--gap {} must be > 0 s", a.gap)));
     }
     let cal = Calibration::load(a.calib.as_deref()).map_err(|e| bad(e.to_string()))?;
-    let cal = match a.physics.as_str() {
-        "calibrated" => cal,
-        "paper" => cal.with_paper_physics(),
-        other => {
-            return Err(bad(format!("--physics `{other}`: expected `calibrated` or `paper`")));
-        }
+    let cal = match a.physics {
+        PhysicsChoice::Calibrated => cal,
+        PhysicsChoice::Paper => cal.with_paper_physics(),
     };
     Ok(Plan {
         settings,
@@ -180,7 +167,7 @@ pub fn run(args: SimArgs) -> anyhow::Result<()> {
             balls.push(ball);
         }
     } else {
-        if a.setting.trim() != "all" {
+        if a.setting.0 != Setting::ALL {
             return Err(bad(format!(
                 "--setting chooses the launcher's balls; it does not apply with --strokes {}",
                 a.strokes

@@ -63,7 +63,7 @@ use std::fmt;
 use heapless::Vec as HVec;
 use nalgebra::{Matrix3, Rotation3};
 
-use crate::motion::Pose6;
+use crate::geometry::{Pose6, rot_zyx, wrap_pi, zyx_angles};
 use crate::physics::Vec3;
 
 /// The number of axes.
@@ -171,23 +171,15 @@ impl Pose {
     }
 
     /// From a position (m) and KUKA A, B, C (rad): R = Rz(A)·Ry(B)·Rx(C),
-    /// as `motion::limits::rot_zyx`.
+    /// as [`rot_zyx`].
     pub fn from_xyz_abc(xyz: [f64; 3], abc: [f64; 3]) -> Self {
-        Pose { position: Vec3::from(xyz), rotation: Rotation3::from_euler_angles(abc[2], abc[1], abc[0]) }
+        Pose { position: Vec3::from(xyz), rotation: Rotation3::from_matrix_unchecked(rot_zyx(abc[0], abc[1], abc[2])) }
     }
 
     /// KUKA A, B, C (rad) of the rotation: A, C in (−π, π], B in
     /// [−π/2, π/2]. At B = ±90° (gimbal lock) A = 0 and C takes the rest.
     pub fn abc(&self) -> [f64; 3] {
-        let r = self.rotation.matrix();
-        let cb = r[(0, 0)].hypot(r[(1, 0)]);
-        let b = (-r[(2, 0)]).atan2(cb);
-        if cb < 1e-12 {
-            // R = Ry(±90°)·Rx(C ∓ A): only C ∓ A is defined.
-            let c = if r[(2, 0)] < 0.0 { r[(0, 1)].atan2(r[(1, 1)]) } else { (-r[(0, 1)]).atan2(r[(1, 1)]) };
-            return [0.0, b, c];
-        }
-        [r[(1, 0)].atan2(r[(0, 0)]), b, r[(2, 1)].atan2(r[(2, 2)])]
+        zyx_angles(self.rotation.matrix())
     }
 
     /// From a motion pose `[x, y, z, a, b, c]` (m, rad; KUKA A/B/C).
@@ -298,12 +290,6 @@ fn ry(t: f64) -> Rotation3<f64> {
 fn rz(t: f64) -> Rotation3<f64> {
     let (s, c) = t.sin_cos();
     Rotation3::from_matrix_unchecked(Matrix3::new(c, -s, 0.0, s, c, 0.0, 0.0, 0.0, 1.0))
-}
-
-/// `x` wrapped into (−π, π].
-fn wrap(x: f64) -> f64 {
-    let y = x - (x / TAU).round() * TAU;
-    if y <= -PI { y + TAU } else { y }
 }
 
 /// Forward kinematics: every frame the KR C4 reports, in B.
@@ -437,7 +423,7 @@ impl ArmGeometry {
         let (s1, c1) = q.0[0].sin_cos();
         Configuration {
             overhead: w.x * c1 - w.y * s1 < 0.0,
-            elbow_up: wrap(q.0[2] - self.stretched_a3()) > 0.0,
+            elbow_up: wrap_pi(q.0[2] - self.stretched_a3()) > 0.0,
             wrist_flipped: q.0[4] < 0.0,
         }
     }
@@ -461,7 +447,7 @@ impl ArmGeometry {
         let a1_front = if rho < OVERHEAD_EPS { singular_a1 } else { (-w.y).atan2(w.x) };
         let l3 = self.forearm.hypot(self.elbow_offset);
         let delta = self.stretched_a3();
-        for (q1, r) in [(wrap(a1_front), rho), (wrap(a1_front + PI), -rho)] {
+        for (q1, r) in [(wrap_pi(a1_front), rho), (wrap_pi(a1_front + PI), -rho)] {
             let u = r - self.shoulder_offset;
             let v = w.z - self.shoulder_height;
             let c = (u * u + v * v - self.upper_arm.powi(2) - l3 * l3) / (2.0 * self.upper_arm * l3);
@@ -472,7 +458,7 @@ impl ArmGeometry {
             // Elbow up first: e < 0 (A3 > stretched).
             for e in [-e0, e0] {
                 let theta2 = v.atan2(u) - (l3 * e.sin()).atan2(self.upper_arm + l3 * e.cos());
-                let (q2, q3) = (wrap(-theta2), wrap(delta - e));
+                let (q2, q3) = (wrap_pi(-theta2), wrap_pi(delta - e));
                 let r3 = rz(-q1) * ry(q2 + q3);
                 let wm = r3.transpose() * r6; // = Rx(−A4)·Ry(A5)·Rx(−A6)
                 let m = wm.matrix();
@@ -488,7 +474,7 @@ impl ArmGeometry {
                     // γ = −A6 from what remains: exact for any α the A5 column allows.
                     let rest = (rx(alpha) * ry(q5)).transpose() * wm;
                     let gamma = rest[(2, 1)].atan2(rest[(1, 1)]);
-                    let q = Joints([q1, q2, q3, wrap(-alpha), wrap(q5), wrap(-gamma)]);
+                    let q = Joints([q1, q2, q3, wrap_pi(-alpha), wrap_pi(q5), wrap_pi(-gamma)]);
                     let (dp, dr) = self.forward(&q).flange.distance(flange);
                     let duplicate = out.iter().any(|o: &Joints| o.max_abs_diff(&q) < 1e-12);
                     if dp <= FK_CHECK && dr <= FK_CHECK && !duplicate {
@@ -713,7 +699,7 @@ impl Arm {
         }
         // Name the limit that the solution closest to `current` (each axis
         // within half a turn of it) breaks.
-        let wrapped = |q: &Joints| Joints(core::array::from_fn(|i| current.0[i] + wrap(q.0[i] - current.0[i])));
+        let wrapped = |q: &Joints| Joints(core::array::from_fn(|i| current.0[i] + wrap_pi(q.0[i] - current.0[i])));
         let mut closest = solutions[0];
         for s in solutions.iter() {
             if self.cost(&wrapped(s), current) < self.cost(&wrapped(&closest), current) {
@@ -915,15 +901,10 @@ mod tests {
     }
 
     #[test]
-    fn kuka_abc_matches_the_motion_helpers() {
+    fn kuka_abc_is_the_geometry_convention() {
         for abc in [[0.3, -0.2, 0.1], [PI, 0.0, 0.0], [-2.0, 1.2, 3.0], [0.5, FRAC_PI_2, 0.2], [0.5, -FRAC_PI_2, 0.2]] {
             let p = Pose::from_xyz_abc([0.1, 0.2, 0.3], abc);
-            let m = crate::motion::limits::rot_zyx(abc[0], abc[1], abc[2]);
-            for i in 0..3 {
-                for j in 0..3 {
-                    assert!((p.rotation[(i, j)] - m[i][j]).abs() < 1e-15);
-                }
-            }
+            assert_eq!(p.rotation.into_inner(), rot_zyx(abc[0], abc[1], abc[2]));
             let back = Pose::from_xyz_abc([0.1, 0.2, 0.3], p.abc());
             assert!(p.distance(&back).1 < 1e-12, "{abc:?} -> {:?}", p.abc());
             let p6 = p.to_pose6();
@@ -960,7 +941,7 @@ mod tests {
             let stretch = (q.0[2] - g.stretched_a3()).sin().abs();
             if q.0[4].sin().abs() > 1e-2 && stretch > 1e-2 && w.x.hypot(w.y) > 1e-2 {
                 checked += 1;
-                let hit = sols.iter().any(|s| (0..AXES).all(|i| wrap(s.0[i] - q.0[i]).abs() < 1e-9));
+                let hit = sols.iter().any(|s| (0..AXES).all(|i| wrap_pi(s.0[i] - q.0[i]).abs() < 1e-9));
                 assert!(hit, "{q:?} not among {sols:?}");
                 // ... and every branch is a different configuration.
                 for (i, a) in sols.iter().enumerate() {

@@ -17,6 +17,8 @@
 //! - [`wire`]: the datagram codecs (checked view over bytes, validated value).
 //! - [`rsi`]: KUKA RSI: XML scanner, codec, and the sans-IO session.
 //! - [`motion`]: the stroke generator and the last safety filter.
+//! - [`geometry`]: the pose, KUKA's Z-Y-X Euler angles, one rotation and
+//!   the angle wraps every module shares.
 //! - [`kinematics`]: the KR 6 R900 sixx — forward and closed-form inverse
 //!   kinematics (all solutions, the continuous one), axis limits.
 //! - [`calib`]: the calibration files in `calib/`.
@@ -31,6 +33,7 @@
 pub mod calib;
 pub mod estimator;
 pub mod fit;
+pub mod geometry;
 pub mod ingest;
 pub mod kinematics;
 pub mod logo;

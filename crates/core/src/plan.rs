@@ -1,6 +1,7 @@
 //! The strike plan: what the estimator publishes and the RSI loop executes
 //! (DESIGN §6). A plain value, copied through a latest-value slot.
 
+use crate::geometry::EulerZyx;
 use crate::physics::Vec3;
 use crate::time::{Duration, Instant};
 
@@ -11,38 +12,8 @@ pub const HIT_RADIUS: f64 = 0.040;
 /// ... within this much of the ball's true crossing of the hitting plane.
 pub const HIT_WINDOW: Duration = Duration::from_millis(4);
 
-/// A bat orientation as KUKA Euler angles ZYX in radians: rotate by `a`
-/// about z, then `b` about the new y, then `c` about the new x.
-#[derive(Copy, Clone, Debug, Default, PartialEq)]
-pub struct EulerZyx {
-    /// First rotation, about z, rad.
-    pub a: f64,
-    /// Second rotation, about the new y, rad.
-    pub b: f64,
-    /// Third rotation, about the new x, rad.
-    pub c: f64,
-}
-
+/// The bat's face at an orientation.
 impl EulerZyx {
-    /// The rotation Rz(a)·Ry(b)·Rx(c): the bat frame's axes in the frame
-    /// the angles are given in (its columns).
-    pub fn matrix(&self) -> nalgebra::Matrix3<f64> {
-        let (sa, ca) = self.a.sin_cos();
-        let (sb, cb) = self.b.sin_cos();
-        let (sc, cc) = self.c.sin_cos();
-        nalgebra::Matrix3::new(
-            ca * cb,
-            ca * sb * sc - sa * cc,
-            ca * sb * cc + sa * sc,
-            sa * cb,
-            sa * sb * sc + ca * cc,
-            sa * sb * cc - ca * sc,
-            -sb,
-            cb * sc,
-            cb * cc,
-        )
-    }
-
     /// The outward normal of the bat's hitting face: −x of the bat (TCP)
     /// frame. The bat hangs below the flange with the blade in the TCP
     /// frame's y–z plane (`calib/robot.toml`), so at the planner's neutral
@@ -103,14 +74,5 @@ mod tests {
         // c spins the blade about its normal: the face stays.
         let spun = EulerZyx { a: 0.0, b: 0.3, c: 0.7 }.face_normal();
         assert!((spun - open).norm() < 1e-12);
-        // The same matrix as the motion layer's T → B conversion uses.
-        let o = EulerZyx { a: 0.4, b: -0.2, c: 0.9 };
-        let r = crate::motion::limits::rot_zyx(o.a, o.b, o.c);
-        let m = o.matrix();
-        for i in 0..3 {
-            for j in 0..3 {
-                assert!((m[(i, j)] - r[i][j]).abs() < 1e-15);
-            }
-        }
     }
 }

@@ -31,10 +31,10 @@ use crate::mock_krc::{self, MockKrcConfig};
 use crate::render::{BallColour, Scene, Sequence, SequenceOptions, render_sequence};
 use crate::returns::{BatPath, ContactReport, ReturnFail, ReturnFails, judge_return, timing_window};
 use crate::stream::{capture_time, stream};
-use crate::truth::{Flight, HitTruth, Truth};
+use crate::truth::{Flight, HitTruth};
 use crate::{Redraws, SimBall, Strokes, TrackerModel, schedule};
+use topspin_core::calib::Calibration;
 use topspin_core::calib::camera::CameraCalib;
-use topspin_core::calib::{Calibration, StrikeCalib};
 use topspin_core::ingest::IngestCounters;
 use topspin_core::logo::stream::LogoCounters;
 use topspin_core::physics::{Propagator, Vec3, rad_to_rps};
@@ -267,7 +267,7 @@ pub fn reachable(cal: &Calibration, ball: &SimBall) -> bool {
 /// (`strike.hit_depth_x`; the later of two) where that does. `None`: out
 /// of reach.
 pub fn meeting(cal: &Calibration, ball: &SimBall) -> Option<HitTruth> {
-    meets(&cal.strike, &ball.truth, &ball.physics)
+    ball.truth.meeting_in(&cal.strike, &ball.physics)
 }
 
 /// The ball's true crossing of each plane of the hitting volume (in the
@@ -281,17 +281,6 @@ fn meeting_among(cal: &Calibration, crossings: &[(f64, Option<HitTruth>)]) -> Op
     cal.strike.planes_outwards().find_map(|k| {
         let (x, h) = crossings[k];
         h.filter(|h| cal.strike.in_window_at(x, h.pos[1], h.pos[2]))
-    })
-}
-
-/// [`meeting`] for a flight's `truth` in the physics `prop`, against the
-/// hitting volume of `strike` (flying only as far as the first plane
-/// that works).
-pub(crate) fn meets(strike: &StrikeCalib, truth: &Truth, prop: &Propagator) -> Option<HitTruth> {
-    let planes = strike.hitting_planes();
-    strike.planes_outwards().find_map(|k| {
-        let x = planes[k];
-        truth.crossing_at(prop, x).filter(|h| strike.in_window_at(x, h.pos[1], h.pos[2]))
     })
 }
 
@@ -790,8 +779,8 @@ fn stream_crops(
 mod tests {
     use super::*;
     use crate::launcher::Setting;
+    use topspin_core::geometry::EulerZyx;
     use topspin_core::physics::BallState;
-    use topspin_core::plan::EulerZyx;
 
     /// A bat logged every 4 ms that stands still where the ball passes
     /// 2 ms after a sample: the distance at the samples is the ball's

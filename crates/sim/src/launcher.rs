@@ -24,8 +24,6 @@ use std::str::FromStr;
 use rand::Rng;
 use serde::{Deserialize, Serialize};
 
-use crate::truth::Truth;
-use topspin_core::calib::StrikeCalib;
 use topspin_core::physics::{BallState, Event, Propagator, StopAt, Table, Vec3, rps_to_rad};
 
 /// The kind of spin a setting puts on the ball.
@@ -349,7 +347,7 @@ fn aim(draw: &Draw, spin_type: SpinType, prop: &Propagator) -> Option<(f64, f64)
 
 /// True when the real table and net accept the shot: first event a bounce
 /// on the robot's half, then the hitting plane before anything else.
-fn accepted(prop: &Propagator, s: &BallState, hit_plane_x: f64) -> bool {
+pub(crate) fn accepted(prop: &Propagator, s: &BallState, hit_plane_x: f64) -> bool {
     let stop = StopAt { t_max: T_MAX, hit_plane_x: Some(hit_plane_x), net: true };
     let (mut s, mut t) = (*s, 0.0);
     match prop.advance(&mut s, &mut t, &stop) {
@@ -383,26 +381,9 @@ pub fn launch_with(
     launch_until(setting, axis, prop, rng, |l| accepted(prop, &l.state, hit_plane_x))
 }
 
-/// [`launch_with`] aimed as a lab aims its launcher at its robot: the
-/// ball must also pass through the hitting volume's window (`strike`):
-/// its crossing of one of the volume's planes after its bounce lies in
-/// that plane's window, as the judges' `demo::meeting` finds it.
-pub fn launch_into_reach(
-    setting: Setting,
-    axis: SpinAxis,
-    prop: &Propagator,
-    strike: &StrikeCalib,
-    rng: &mut impl Rng,
-) -> Result<Launch, NoValidShot> {
-    let hit_x = strike.hit_plane_x;
-    launch_until(setting, axis, prop, rng, |l| {
-        accepted(prop, &l.state, hit_x) && crate::demo::meets(strike, &Truth::compute(l, prop, hit_x), prop).is_some()
-    })
-}
-
 /// Draws and aims shots of `setting` until `ok` takes one (at most
 /// [`MAX_ATTEMPTS`] draws).
-fn launch_until(
+pub(crate) fn launch_until(
     setting: Setting,
     axis: SpinAxis,
     prop: &Propagator,
@@ -475,35 +456,6 @@ mod tests {
                 }
             }
         }
-    }
-
-    #[test]
-    fn an_aimed_launcher_sends_every_setting_through_the_hitting_window() {
-        let cal = Calibration::default_cell();
-        let prop = cal.propagator();
-        let x_hit = cal.strike.hit_plane_x;
-        let (mut plain_out, mut n) = (0, 0);
-        for setting in Setting::ALL {
-            for seed in 0..12 {
-                let l = launch_into_reach(
-                    setting,
-                    SpinAxis::Perpendicular,
-                    &prop,
-                    &cal.strike,
-                    &mut ChaCha8Rng::seed_from_u64(seed),
-                )
-                .unwrap_or_else(|e| panic!("seed {seed}: {e}"));
-                assert!(accepted(&prop, &l.state, x_hit));
-                let truth = Truth::compute(&l, &prop, x_hit);
-                assert!(crate::demo::meets(&cal.strike, &truth, &prop).is_some(), "{setting} seed {seed}");
-                let plain = launch(setting, &prop, x_hit, &mut ChaCha8Rng::seed_from_u64(seed)).unwrap();
-                let truth = Truth::compute(&plain, &prop, x_hit);
-                plain_out += crate::demo::meets(&cal.strike, &truth, &prop).is_none() as usize;
-                n += 1;
-            }
-        }
-        // The plain launcher sends some of the same draws out of reach.
-        assert!(plain_out > 0, "{plain_out} of {n}");
     }
 
     #[test]

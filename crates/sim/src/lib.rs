@@ -12,6 +12,7 @@
 //! - [`faults`]: the tracker-side fault injector around the stream.
 //! - [`strikes`]: a synthetic strike-plan stream for the RSI tests.
 //! - [`mock_krc`]: the mock KR C4 (RSI client, controller model, faults).
+//! - [`pair`]: the RSI session and the mock KR C4 on one virtual clock.
 //! - [`render`]: labelled synthetic ceiling-camera crops.
 //! - [`demo`]: tracker + daemon + mock KR C4 on loopback, judged.
 //! - [`returns`]: the judge of returns: the bat's actual path meets the
@@ -32,6 +33,7 @@ pub mod demo;
 pub mod faults;
 pub mod launcher;
 pub mod mock_krc;
+pub mod pair;
 pub mod probe;
 pub mod render;
 pub mod returns;
@@ -95,7 +97,7 @@ pub fn simulate_in(
             let (mut rng_l, mut rng_t) = ball_rngs(seed, k);
             let l = if strokes == Strokes::AimedLauncher {
                 let axis = world.map_or(SpinAxis::Perpendicular, |w| w.axis);
-                launcher::launch_into_reach(Setting::ALL[k % 9], axis, &physics, &cal.strike, &mut rng_l).ok()?
+                strokes::launch_into_reach(Setting::ALL[k % 9], axis, &physics, &cal.strike, &mut rng_l).ok()?
             } else {
                 strokes::draw_human(strokes, &physics, &mut rng_l, &mut redraws)?
             };

@@ -423,6 +423,10 @@ impl Scene {
     }
 }
 
+/// Fewest frames for a rendered sequence to count as filmed (the logo
+/// estimators need this many crops of one flight).
+pub const MIN_FILMED_FRAMES: usize = 10;
+
 /// Options of a rendered sequence.
 #[derive(Copy, Clone, Debug, PartialEq)]
 pub struct SequenceOptions {

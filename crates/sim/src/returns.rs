@@ -32,8 +32,9 @@ use crate::truth::Flight;
 use topspin_core::calib::Calibration;
 use topspin_core::calib::robot::RobotFile;
 use topspin_core::estimator::aim::face_normal;
+use topspin_core::geometry::EulerZyx;
 use topspin_core::physics::{BallState, Bat, Event, Impact, Propagator, RacketModel, Regime, StopAt, Vec3};
-use topspin_core::plan::{EulerZyx, face_tilt};
+use topspin_core::plan::face_tilt;
 use topspin_core::time::{Duration, Instant};
 
 /// How far from the true crossing of the hitting plane the bat may meet

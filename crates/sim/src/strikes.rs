@@ -3,15 +3,16 @@
 //! until 80 ms before it, converging on the final pose and time, then
 //! committed. Seeded; [`StrikeMiss`] measures how the robot met each
 //! committed plan. The RSI tests drive the session with it over UDP
-//! (`tests/rsi_loopback.rs`) and on the virtual clock
+//! (`crates/sim/tests/rsi_loopback.rs`) and on the virtual clock
 //! (`crates/sim/tests/rsi_pair.rs`).
 
 use crate::mock_krc::PathSample;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
+use topspin_core::geometry::EulerZyx;
 use topspin_core::motion::MotionLimits;
 use topspin_core::physics::Vec3;
-use topspin_core::plan::{EulerZyx, StrikePlan};
+use topspin_core::plan::StrikePlan;
 use topspin_core::time::{Duration, Instant};
 
 /// One plan of the stream, to publish at its `made_at`.

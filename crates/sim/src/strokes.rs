@@ -20,9 +20,11 @@ use std::sync::OnceLock;
 
 use rand::Rng;
 
+use topspin_core::calib::StrikeCalib;
 use topspin_core::physics::{BallState, Event, Propagator, StopAt, Vec3};
 
-use crate::launcher::{Launch, Power, Setting, SpinType};
+use crate::launcher::{Launch, NoValidShot, Power, Setting, SpinAxis, SpinType, accepted, launch_until};
+use crate::truth::Truth;
 
 /// The balls' source.
 #[derive(Copy, Clone, Debug, Default, PartialEq, Eq)]
@@ -265,6 +267,23 @@ pub fn draw_human(strokes: Strokes, prop: &Propagator, rng: &mut impl Rng, redra
     None
 }
 
+/// [`launch_with`](crate::launcher::launch_with) aimed as a lab aims its launcher at its robot: the
+/// ball must also pass through the hitting volume's window (`strike`):
+/// its crossing of one of the volume's planes after its bounce lies in
+/// that plane's window, as the judges find it ([`Truth::meeting_in`]).
+pub fn launch_into_reach(
+    setting: Setting,
+    axis: SpinAxis,
+    prop: &Propagator,
+    strike: &StrikeCalib,
+    rng: &mut impl Rng,
+) -> Result<Launch, NoValidShot> {
+    let hit_x = strike.hit_plane_x;
+    launch_until(setting, axis, prop, rng, |l| {
+        accepted(prop, &l.state, hit_x) && Truth::compute(l, prop, hit_x).meeting_in(strike, prop).is_some()
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -332,5 +351,35 @@ mod tests {
             assert_eq!(s.to_string().parse::<Strokes>(), Ok(s));
         }
         assert_eq!("elite".parse::<Strokes>(), Err(UnknownStrokes("elite".into())));
+    }
+
+    #[test]
+    fn an_aimed_launcher_sends_every_setting_through_the_hitting_window() {
+        let cal = Calibration::default_cell();
+        let prop = cal.propagator();
+        let x_hit = cal.strike.hit_plane_x;
+        let (mut plain_out, mut n) = (0, 0);
+        for setting in Setting::ALL {
+            for seed in 0..12 {
+                let l = launch_into_reach(
+                    setting,
+                    SpinAxis::Perpendicular,
+                    &prop,
+                    &cal.strike,
+                    &mut ChaCha8Rng::seed_from_u64(seed),
+                )
+                .unwrap_or_else(|e| panic!("seed {seed}: {e}"));
+                assert!(accepted(&prop, &l.state, x_hit));
+                let truth = Truth::compute(&l, &prop, x_hit);
+                assert!(truth.meeting_in(&cal.strike, &prop).is_some(), "{setting} seed {seed}");
+                let plain =
+                    crate::launcher::launch(setting, &prop, x_hit, &mut ChaCha8Rng::seed_from_u64(seed)).unwrap();
+                let truth = Truth::compute(&plain, &prop, x_hit);
+                plain_out += truth.meeting_in(&cal.strike, &prop).is_none() as usize;
+                n += 1;
+            }
+        }
+        // The plain launcher sends some of the same draws out of reach.
+        assert!(plain_out > 0, "{plain_out} of {n}");
     }
 }

@@ -6,6 +6,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::launcher::{Launch, Setting};
+use topspin_core::calib::StrikeCalib;
 use topspin_core::physics::{BallState, Event, Propagator, StopAt, Vec3};
 
 /// Longest flight followed, s.
@@ -167,6 +168,19 @@ impl Truth {
                 _ => return None,
             }
         }
+    }
+
+    /// Where the ball can be met in the hitting volume of `strike`: its
+    /// crossing of the hitting plane where that lies in the window, else of
+    /// the nearest other plane of the volume where that does (flying, in
+    /// the physics `prop`, only as far as the first plane that works).
+    /// `None`: out of reach.
+    pub fn meeting_in(&self, strike: &StrikeCalib, prop: &Propagator) -> Option<HitTruth> {
+        let planes = strike.hitting_planes();
+        strike.planes_outwards().find_map(|k| {
+            let x = planes[k];
+            self.crossing_at(prop, x).filter(|h| strike.in_window_at(x, h.pos[1], h.pos[2]))
+        })
     }
 
     /// The launch as a [`Launch`] again.

@@ -17,8 +17,8 @@ use std::net::{IpAddr, Ipv4Addr, SocketAddr};
 
 use crate::demo::{BallVerdict, DemoConfig, LEAD_IN, demo_daemon_config, judge_strokes, render_crops};
 use crate::faults::{InjectedCounts, Sender, inject, plan_datagrams};
-use crate::mock_krc::pair::Pair;
 use crate::mock_krc::{Faults, MockKrcConfig, MockResult};
+use crate::pair::Pair;
 use crate::render::Sequence;
 use crate::stream::capture_time;
 use crate::{SimBall, schedule, simulate_in};

@@ -14,8 +14,8 @@ use topspin_core::rsi::session::{ArmMode, RsiSession, SessionConfig, SessionEven
 use topspin_core::rsi::start::{LikelyFrame, StartRefused};
 use topspin_core::time::{Duration, Instant};
 use topspin_sim::mock_krc::controller::ControllerConfig;
-use topspin_sim::mock_krc::pair::Pair;
 use topspin_sim::mock_krc::{Faults, MockKrcConfig, PathSample};
+use topspin_sim::pair::Pair;
 use topspin_sim::strikes::{StrikeMiss, strike_stream};
 
 const T0: Instant = Instant(1_000_000_000);

@@ -1,6 +1,6 @@
 //! The RSI session against the mock KR C4 on a virtual clock
-//! ([`topspin_sim::mock_krc::pair::Pair`]): what `tests/rsi_loopback.rs`
-//! and `tests/rsi_faults.rs` check over UDP on the wall clock, here exact
+//! ([`topspin_sim::pair::Pair`]): what `crates/sim/tests/rsi_loopback.rs`
+//! and `crates/sim/tests/rsi_faults.rs` check over UDP on the wall clock, here exact
 //! and deterministic — no tolerance for a machine's scheduling noise, no
 //! sleeps. 10 000 cycles of strikes with every answer on time and the bat
 //! at each hitting pose at its hitting time; delayed, dropped, duplicated
@@ -18,8 +18,8 @@ use topspin_core::motion::MotionLimits;
 use topspin_core::rsi::session::{Correction, RsiSession, SessionConfig, SessionEvent};
 use topspin_core::time::{Duration, Instant};
 use topspin_sim::mock_krc::controller::ControllerConfig;
-use topspin_sim::mock_krc::pair::Pair;
 use topspin_sim::mock_krc::{Faults, MockKrcConfig, MockResult, StopReason};
+use topspin_sim::pair::Pair;
 use topspin_sim::strikes::{StrikeMiss, strike_stream};
 
 const T0: Instant = Instant(1_000_000_000);

@@ -52,6 +52,7 @@ use nalgebra::{Matrix3, Vector3};
 use serde::{Deserialize, Serialize};
 
 use super::robot::CellPlacement;
+use crate::geometry::wrap_deg_near;
 use crate::physics::{Table, Vec3};
 
 /// The fewest touches a fit accepts (three fix a rigid transform; the
@@ -289,12 +290,6 @@ fn arr(p: Vec3) -> [f64; 3] {
 
 fn centroid(ps: &[Vec3]) -> Vec3 {
     ps.iter().fold(Vec3::zeros(), |s, p| s + p) / ps.len() as f64
-}
-
-/// `a` wrapped into (`near` − 180°, `near` + 180°], degrees.
-pub fn wrap_deg_near(a: f64, near: f64) -> f64 {
-    let d = (a - near).rem_euclid(360.0);
-    near + if d > 180.0 { d - 360.0 } else { d }
 }
 
 /// Checks the touch set (see [`Degenerate`]).
@@ -691,9 +686,6 @@ mod tests {
             assert!(f.rms_m < 1e-12 && f.worst_m < 1e-12 && f.full.rms_m < 1e-12);
             assert_eq!(f.check(&Bounds::default()), Ok(()));
         }
-        assert_eq!(wrap_deg_near(-176.5, 180.0), 183.5);
-        assert_eq!(wrap_deg_near(-2.0, 180.0), 358.0);
-        assert_eq!(wrap_deg_near(10.0, 0.0), 10.0);
     }
 
     #[test]

@@ -475,23 +475,6 @@ impl RobotFile {
         Ok(())
     }
 
-    /// What the way home must respect (`motion::homing`): `[start]`'s speed
-    /// and rate, the workspace box, `[poscorr]`.
-    pub fn homing_limits(&self) -> crate::motion::homing::HomingLimits {
-        let p = &self.poscorr;
-        crate::motion::homing::HomingLimits {
-            speed: self.start.speed_mm_s * 1e-3,
-            rate: self.start.rate_deg_s.to_radians(),
-            box_lo: self.workspace.min_xyz_m,
-            box_hi: self.workspace.max_xyz_m,
-            poscorr_lower_mm: p.lower_xyz_mm,
-            poscorr_upper_mm: p.upper_xyz_mm,
-            poscorr_rot_deg: p.max_rot_angle_deg,
-            mon_trans_mm: p.mon_max_trans_mm,
-            mon_rot_deg: p.mon_max_rot_deg,
-        }
-    }
-
     /// The arm: its kinematics (chain and bat) and axis limits, in SI. For a
     /// file that passed [`validate`](Self::validate) (panics on a chain
     /// that validation rejects).

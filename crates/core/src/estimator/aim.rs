@@ -58,7 +58,7 @@ const RETARGET_NEAR: f64 = 0.2;
 const MAX_STEP: f64 = 0.1745;
 /// The heading's bound, rad: the workspace allows ±45° about home
 /// (`workspace.abc_range_deg`), strokes keep 10° inside it
-/// ([`crate::motion::generator::ORIENTATION_MARGIN_RAD`]).
+/// ([`crate::motion::margins::ORIENTATION_MARGIN_RAD`]).
 const MAX_HEADING: f64 = 0.61;
 /// ∂x/∂θ above −this (m/rad) is the lob side of the landing's turn.
 const LOB_SLOPE: f64 = 0.5;
@@ -116,7 +116,7 @@ pub struct Aim {
 }
 
 /// The face's outward normal for tilt θ and heading ψ (Euler a = ψ,
-/// b = θ in T; [`crate::plan::EulerZyx::face_normal`]).
+/// b = θ in T; [`crate::geometry::EulerZyx::face_normal`]).
 pub fn face_normal(tilt: f64, heading: f64) -> Vec3 {
     let (st, ct) = tilt.sin_cos();
     let (sp, cp) = heading.sin_cos();

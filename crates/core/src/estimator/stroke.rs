@@ -18,8 +18,8 @@
 
 use crate::calib::StrikeCalib;
 use crate::fit::HitPoint;
+use crate::geometry::EulerZyx;
 use crate::physics::Vec3;
-use crate::plan::EulerZyx;
 
 /// Why no plan was published for a prediction.
 #[derive(Copy, Clone, Debug, PartialEq, Eq)]

@@ -72,6 +72,40 @@ pub struct IngestCounters {
 }
 
 /// The ingest state: source filter, sequence tracking, clock mapping.
+///
+/// One tracker datagram in (its bytes, where from, when it arrived on our
+/// clock), one observation on our clock out; everything else is counted:
+///
+/// ```
+/// use std::net::SocketAddr;
+/// use topspin_core::ingest::{Dropped, Ingest};
+/// use topspin_core::time::Instant;
+/// use topspin_core::wire::observation::{OBSERVATION_LEN, Observation};
+///
+/// let tracker: SocketAddr = "192.168.1.20:5000".parse().unwrap();
+/// let mut ingest = Ingest::new(Some(tracker.ip()), 0);
+///
+/// let obs = Observation {
+///     seq: 1,
+///     capture: Instant(5_000_000_000),
+///     pos: [-1.2, 0.1, 0.3],
+///     residual: 0.001,
+///     cameras: 4,
+///     valid: true,
+/// };
+/// let mut datagram = [0u8; OBSERVATION_LEN];
+/// obs.emit(&mut datagram);
+///
+/// let got = ingest.accept(&datagram, tracker, Instant(7_000_000)).unwrap();
+/// assert_eq!(got.seq, 1);
+/// assert!((got.pos.x + 1.2).abs() < 1e-6);
+/// // The same datagram again, and one from elsewhere: dropped, counted.
+/// assert_eq!(ingest.accept(&datagram, tracker, Instant(7_100_000)), Err(Dropped::Duplicate));
+/// let stranger: SocketAddr = "10.0.0.9:5000".parse().unwrap();
+/// assert_eq!(ingest.accept(&datagram, stranger, Instant(7_200_000)), Err(Dropped::Foreign));
+/// let c = ingest.counters();
+/// assert_eq!((c.accepted, c.duplicate, c.foreign), (1, 1, 1));
+/// ```
 #[derive(Debug, Clone)]
 pub struct Ingest {
     allowed_source: Option<IpAddr>,

@@ -31,7 +31,7 @@ pub struct SpinEstimate {
 
 /// Floors on the logo's uncertainty: the rotation fit's residuals of a
 /// clean sequence can be tiny, but the renderer's truth says the estimate
-/// is rarely better than this (`topspin logo --eval`).
+/// is rarely better than this (`topspin logo eval`).
 pub(crate) const LOGO_MIN_RATE_STD: f64 = 1.5; // rad/s
 pub(crate) const LOGO_MIN_AXIS_STD: f64 = 0.03; // rad
 

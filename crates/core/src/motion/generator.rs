@@ -56,10 +56,14 @@
 
 use rsruckig::prelude::*;
 
+use super::MotionLimits;
 use super::blend::Blend;
-use super::limits::unwrap_near;
+use super::margins::{
+    JERK_RAMP_S, JOINT_LIMIT_FRACTION, ORIENTATION_MARGIN_RAD, PATH_LIMIT_MARGIN_RAD, PATH_WALL_MARGIN_M,
+    VELOCITY_STEP_S, WRIST_MARGIN,
+};
 use super::reach;
-use super::{MotionLimits, Pose6};
+use crate::geometry::{Pose6, unwrap_near};
 use crate::kinematics::{AXES, Joints, LimitKind, LimitViolation, Pose, Unreachable};
 use crate::plan::StrikePlan;
 use crate::time::Instant;
@@ -87,9 +91,6 @@ pub(crate) const KEEP_MAX_DP_M: f64 = 0.15;
 pub(crate) const BALL_SPEED_AT_HIT: f64 = 4.0;
 /// Duration nudges tried when Ruckig misses the hitting time, s.
 const RETRY_NUDGES_S: [f64; 4] = [-0.0003, 0.0003, -0.0007, 0.0007];
-/// Share of each axis's speed and acceleration a stroke may use (the rest
-/// absorbs the lag's feed-forward and the refinements to come).
-pub const JOINT_LIMIT_FRACTION: f64 = 0.97;
 /// Share of the stroke's acceleration (and jerk) a plan is first tried
 /// at, where it still arrives on time: a time-optimal stroke ends in
 /// limit-bound acceleration, where a refinement can only arrive late; the
@@ -103,44 +104,11 @@ const PATH_CHECKS: usize = 16;
 const RATE_CHECK_S: f64 = 0.001;
 /// … at most this many times (a blend over 0.25 s is checked coarser).
 const MAX_RATE_CHECKS: usize = 256;
-/// Time for an axis to reach full acceleration (sets the jerk limit), s.
-pub const JERK_RAMP_S: f64 = 0.0125;
 /// Share of the stroke's limits for follow-through and return.
 pub const CALM_LIMIT_FRACTION: f64 = 0.5;
 /// A new ball's stroke arriving later than this is refused, s (the bat
 /// would be ~4 cm behind a ball crossing at 4 m/s).
 pub const MAX_LATE_S: f64 = 0.010;
-/// A stroke's targets keep this far inside the software limits, rad (the
-/// path between may overshoot its ends a little, and the lag's
-/// feed-forward leads it).
-pub const LIMIT_MARGIN_RAD: f64 = 10.0 * std::f64::consts::PI / 180.0;
-/// A stroke at the full limits keeps this far inside the software limits
-/// all along its path, rad: Ruckig's fastest profile may swing an axis
-/// well past its target to turn it round (10° in the case that stopped the
-/// virtual cell at A3's limit switch). At the swing's extreme the axis is
-/// at rest, so the lag's feed-forward adds little there; the margin covers
-/// the instants between the [`PATH_CHECKS`] (under half a degree at full
-/// acceleration over half a second). 5° cost the virtual cell 2 of 144
-/// hits on seeds 14-19, 2° none.
-pub const PATH_LIMIT_MARGIN_RAD: f64 = 2.0 * std::f64::consts::PI / 180.0;
-/// How far inside the workspace box a stroke's path keeps the TCP at the
-/// [`PATH_CHECKS`], m: between them the TCP moves on by up to ~0.6 mm
-/// where it turns (a run-up's far end; seed 12 of the virtual cell: 0.1 mm
-/// past the wall between two checks, two cycles braked by the safety
-/// filter).
-pub const PATH_WALL_MARGIN_M: f64 = 0.002;
-/// A stroke's face keeps this far inside the workspace's orientation
-/// range (`workspace.abc_range_deg`), rad: the joint-space path into and
-/// out of the hitting pose turns the bat on past it, and the safety filter
-/// brakes a stroke that would leave the range (a step the axes feel).
-pub const ORIENTATION_MARGIN_RAD: f64 = 10.0 * std::f64::consts::PI / 180.0;
-/// A stroke's targets keep A3 this far from the stretched elbow, rad.
-pub const ELBOW_MARGIN_RAD: f64 = 10.0 * std::f64::consts::PI / 180.0;
-/// A stroke's joints keep |A5| at least this many times the singular
-/// threshold, on the same side as now.
-pub const WRIST_MARGIN: f64 = 5.0;
-/// Step used to turn the bat velocity into joint velocities, s.
-const VELOCITY_STEP_S: f64 = 1e-3;
 
 /// What the generator is doing.
 #[derive(Copy, Clone, Debug, PartialEq, Eq)]

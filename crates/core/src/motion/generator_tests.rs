@@ -3,8 +3,8 @@
 
 use super::*;
 use crate::calib::Calibration;
+use crate::geometry::EulerZyx;
 use crate::physics::Vec3;
-use crate::plan::EulerZyx;
 use crate::time::Duration;
 
 const T0: u64 = 1_000_000_000;

@@ -25,8 +25,8 @@
 
 #![allow(clippy::needless_range_loop)] // parallel per-axis arrays
 
-use super::Pose6;
-use super::limits::unwrap_near;
+use crate::calib::RobotFile;
+use crate::geometry::{Pose6, unwrap_near};
 use crate::kinematics::{AXES, Arm, Joints, LimitViolation};
 
 /// Poses checked along the way (the start and home included).
@@ -60,6 +60,25 @@ pub struct HomingLimits {
     pub mon_trans_mm: f64,
     /// POSCORRMON: total rotation, degrees.
     pub mon_rot_deg: f64,
+}
+
+impl HomingLimits {
+    /// From a validated `robot.toml`: `[start]`'s speed and rate, the
+    /// workspace box, `[poscorr]`.
+    pub fn from_robot(r: &RobotFile) -> Self {
+        let p = &r.poscorr;
+        HomingLimits {
+            speed: r.start.speed_mm_s * 1e-3,
+            rate: r.start.rate_deg_s.to_radians(),
+            box_lo: r.workspace.min_xyz_m,
+            box_hi: r.workspace.max_xyz_m,
+            poscorr_lower_mm: p.lower_xyz_mm,
+            poscorr_upper_mm: p.upper_xyz_mm,
+            poscorr_rot_deg: p.max_rot_angle_deg,
+            mon_trans_mm: p.mon_max_trans_mm,
+            mon_rot_deg: p.mon_max_rot_deg,
+        }
+    }
 }
 
 /// Why the way home is refused.
@@ -274,7 +293,7 @@ mod tests {
 
     fn setup() -> (MotionLimits, HomingLimits) {
         let robot = Calibration::default_cell().robot;
-        (MotionLimits::from_robot(&robot), robot.homing_limits())
+        (MotionLimits::from_robot(&robot), HomingLimits::from_robot(&robot))
     }
 
     /// Steps of a way sampled every 4 ms: the largest TCP step (m) and turn

@@ -4,11 +4,9 @@
 #![allow(clippy::needless_range_loop)] // parallel per-axis arrays
 
 use crate::calib::RobotFile;
+use crate::geometry::{EulerZyx, Pose6, rot_zyx, unwrap_near, zyx_angles_asin};
 use crate::kinematics::{Arm, Joints};
 use crate::physics::Vec3;
-use crate::plan::EulerZyx;
-
-use super::Pose6;
 
 /// Everything motion needs to know about the cell, in SI.
 #[derive(Clone, Debug, PartialEq)]
@@ -77,50 +75,10 @@ impl MotionLimits {
     /// A bat orientation (Euler ZYX in T) as KUKA A/B/C in B, each angle
     /// unwrapped to lie within π of home.
     pub fn orientation_t_to_b(&self, o: EulerZyx) -> [f64; 3] {
-        let r_t = rot_zyx(o.a, o.b, o.c);
-        let r_bt = rot_zyx(-self.base_yaw, 0.0, 0.0);
-        let r = mat_mul(&r_bt, &r_t);
-        let (a, b, c) = zyx_of(&r);
+        let r = rot_zyx(-self.base_yaw, 0.0, 0.0) * o.matrix();
+        let [a, b, c] = zyx_angles_asin(&r);
         [unwrap_near(a, self.home[3]), unwrap_near(b, self.home[4]), unwrap_near(c, self.home[5])]
     }
-}
-
-type Mat3 = [[f64; 3]; 3];
-
-/// Rz(a)·Ry(b)·Rx(c).
-pub fn rot_zyx(a: f64, b: f64, c: f64) -> Mat3 {
-    let (sa, ca) = a.sin_cos();
-    let (sb, cb) = b.sin_cos();
-    let (sc, cc) = c.sin_cos();
-    [
-        [ca * cb, ca * sb * sc - sa * cc, ca * sb * cc + sa * sc],
-        [sa * cb, sa * sb * sc + ca * cc, sa * sb * cc - ca * sc],
-        [-sb, cb * sc, cb * cc],
-    ]
-}
-
-fn mat_mul(x: &Mat3, y: &Mat3) -> Mat3 {
-    let mut r = [[0.0; 3]; 3];
-    for (i, row) in r.iter_mut().enumerate() {
-        for (j, v) in row.iter_mut().enumerate() {
-            *v = (0..3).map(|k| x[i][k] * y[k][j]).sum();
-        }
-    }
-    r
-}
-
-/// Euler ZYX (a, b, c) of a rotation matrix.
-pub(crate) fn zyx_of(r: &Mat3) -> (f64, f64, f64) {
-    let b = (-r[2][0]).clamp(-1.0, 1.0).asin();
-    let a = r[1][0].atan2(r[0][0]);
-    let c = r[2][1].atan2(r[2][2]);
-    (a, b, c)
-}
-
-/// `x` plus a multiple of 2π, within π of `reference`.
-pub fn unwrap_near(x: f64, reference: f64) -> f64 {
-    let tau = std::f64::consts::TAU;
-    x - ((x - reference) / tau).round() * tau
 }
 
 #[cfg(test)]
@@ -137,7 +95,5 @@ mod tests {
         }
         let p = lim.point_t_to_b(Vec3::new(1.70, 0.0, 0.40));
         assert!((p - Vec3::new(0.35, 0.0, 0.45)).norm() < 1e-12);
-        let (a, b, c) = zyx_of(&rot_zyx(0.3, -0.2, 0.1));
-        assert!((a - 0.3).abs() + (b + 0.2).abs() + (c - 0.1).abs() < 1e-12);
     }
 }

@@ -26,12 +26,10 @@ mod blend;
 pub mod generator;
 pub mod homing;
 pub mod limits;
+pub mod margins;
 pub mod reach;
 pub mod safety;
 
 pub use generator::{Phase, PlanRejected, StrokeGenerator};
 pub use limits::MotionLimits;
 pub use safety::SafetyFilter;
-
-/// A TCP pose in B: x, y, z (m), a, b, c (rad, KUKA Euler ZYX, unwrapped).
-pub type Pose6 = [f64; 6];

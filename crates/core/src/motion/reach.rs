@@ -18,11 +18,14 @@
 
 #![allow(clippy::needless_range_loop)] // parallel per-axis arrays
 
-use super::generator::{ELBOW_MARGIN_RAD, JERK_RAMP_S, JOINT_LIMIT_FRACTION, LIMIT_MARGIN_RAD, ORIENTATION_MARGIN_RAD};
-use super::{MotionLimits, Pose6};
+use super::MotionLimits;
+use super::margins::{
+    ELBOW_MARGIN_RAD, JERK_RAMP_S, JOINT_LIMIT_FRACTION, LIMIT_MARGIN_RAD, ORIENTATION_MARGIN_RAD, VELOCITY_STEP_S,
+};
+use crate::geometry::EulerZyx;
+use crate::geometry::Pose6;
 use crate::kinematics::{AXES, Axis, Joints, LimitKind, LimitViolation, Pose};
 use crate::physics::Vec3;
-use crate::plan::EulerZyx;
 
 /// `q` at least [`LIMIT_MARGIN_RAD`] inside every software limit.
 pub(crate) fn inside_margin(lim: &MotionLimits, q: &Joints) -> Result<(), LimitViolation> {
@@ -132,9 +135,6 @@ pub const REACH_GRID_M: f64 = 0.05;
 pub const REACH_TILT_STEP_DEG: f64 = 5.0;
 /// Most tilts one map holds (±40° in 5° steps: 17).
 pub const REACH_TILTS: usize = 33;
-/// Step used to turn a bat velocity into joint velocities, s (the
-/// generator's).
-const VELOCITY_STEP_S: f64 = 1e-3;
 
 /// The fastest bat, m/s, along the face's normal at each tilt of the map
 /// at one point (0: the arm cannot present that face there).

@@ -11,7 +11,8 @@
 
 #![allow(clippy::needless_range_loop)] // parallel per-axis arrays
 
-use super::{MotionLimits, Pose6};
+use super::MotionLimits;
+use crate::geometry::Pose6;
 
 /// The filter's state: the last pose sent and its per-cycle velocity.
 #[derive(Clone, Debug, PartialEq)]

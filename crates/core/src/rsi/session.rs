@@ -59,11 +59,11 @@ use super::follow::FollowMonitor;
 use super::start::{StartRefused, Verdict, assess, from_home};
 use crate::calib::Calibration;
 use crate::calib::robot::StartPolicy;
+use crate::geometry::{Pose6, unwrap_near};
 use crate::kinematics::{Joints, Pose, Unreachable};
 use crate::motion::generator::Phase;
 use crate::motion::homing::{HomingLimits, HomingPath, WayHomeBlocked, correction};
-use crate::motion::limits::unwrap_near;
-use crate::motion::{MotionLimits, PlanRejected, Pose6, SafetyFilter, StrokeGenerator};
+use crate::motion::{MotionLimits, PlanRejected, SafetyFilter, StrokeGenerator};
 use crate::plan::StrikePlan;
 use crate::time::{Duration, Instant};
 
@@ -194,7 +194,7 @@ impl SessionConfig {
             },
             correction: Correction::Cartesian,
             start: c.robot.start.clone(),
-            homing: c.robot.homing_limits(),
+            homing: HomingLimits::from_robot(&c.robot),
         }
     }
 }
@@ -405,6 +405,40 @@ pub enum ConfigError {
 }
 
 /// The sans-IO RSI session (see the module doc).
+///
+/// Build it from the calibration, feed it each `<Rob>` with the time it
+/// arrived, and send the `<Sen>` it writes:
+///
+/// ```
+/// use topspin_core::calib::Calibration;
+/// use topspin_core::motion::MotionLimits;
+/// use topspin_core::rsi::codec::{KukaPose, RobElement, RobFrame, SenFrame};
+/// use topspin_core::rsi::session::{RsiSession, SessionConfig};
+/// use topspin_core::time::Instant;
+///
+/// let cal = Calibration::default_cell();
+/// let mut session = RsiSession::new(SessionConfig::from_calibration(&cal, "ImFree")).unwrap();
+///
+/// // The controller's first request: the arm at home, IPOC 1000.
+/// let home_joints = MotionLimits::from_robot(&cal.robot).home_joints.degrees();
+/// let rob = RobFrame {
+///     ipoc: 1000,
+///     rist: Some(KukaPose::from_array([350.0, 0.0, 450.0, 180.0, 0.0, 0.0])),
+///     aipos: Some(home_joints),
+///     ..Default::default()
+/// };
+/// let mut request = [0u8; 1024];
+/// let n = rob.emit(&[RobElement::RIst, RobElement::AIPos], 4, &mut request).unwrap();
+///
+/// // The answer goes into our buffer; no clock, no socket.
+/// let mut answer = [0u8; 1024];
+/// let len = session.handle_datagram(Instant(1_000_000), &request[..n], &mut answer).unwrap();
+/// let sen = SenFrame::parse(&answer[..len]).unwrap();
+/// assert_eq!(sen.ipoc, 1000);
+/// assert_eq!(sen.sentype, b"ImFree");
+/// // Home, no plan: no correction.
+/// assert_eq!(sen.rkorr.unwrap().to_array(), [0.0; 6]);
+/// ```
 #[derive(Debug)]
 pub struct RsiSession {
     cfg: SessionConfig,
@@ -1099,9 +1133,9 @@ impl RsiSession {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::geometry::EulerZyx;
     use crate::kinematics::{Axis, LimitKind};
     use crate::physics::Vec3;
-    use crate::plan::EulerZyx;
     use crate::rsi::codec::{RobElement, SenView};
 
     const T0: u64 = 1_000_000_000;

@@ -15,10 +15,10 @@
 //! turned about its z axis).
 
 use crate::calib::robot::StartPolicy;
+use crate::geometry::{Pose6, unwrap_near};
 use crate::kinematics::{Arm, Joints, LimitViolation, Pose};
+use crate::motion::MotionLimits;
 use crate::motion::homing::{HomingLimits, HomingPath, WayHomeBlocked};
-use crate::motion::limits::unwrap_near;
-use crate::motion::{MotionLimits, Pose6};
 use crate::rsi::codec::{Axes, CodecError, KukaPose};
 
 /// Which frame most likely differs from the calibration.

@@ -59,8 +59,9 @@ mod writer;
 
 use serde::{Deserialize, Serialize};
 
+use topspin_core::geometry::EulerZyx;
 use topspin_core::physics::Vec3;
-use topspin_core::plan::{EulerZyx, StrikePlan};
+use topspin_core::plan::StrikePlan;
 use topspin_core::time::Instant;
 use topspin_core::wire::observation::Observation;
 

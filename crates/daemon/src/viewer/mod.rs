@@ -42,7 +42,9 @@ pub mod replay;
 pub mod sink;
 
 use foxglove::messages as fm;
+use nalgebra::{Rotation3, UnitQuaternion};
 use serde::Serialize;
+use topspin_core::geometry::rot_zyx;
 
 pub use crate::channels::{TOPICS, Topic};
 pub use crate::runtime::telemetry::{LogoRecord, QueueDepths};
@@ -143,16 +145,10 @@ fn qmul(p: fm::Quaternion, q: fm::Quaternion) -> fm::Quaternion {
     }
 }
 
-/// Rotation of KUKA Euler angles ZYX (rad): `a` about z, then `b` about
-/// the new y, then `c` about the new x.
+/// Rotation of KUKA Euler angles Z-Y-X (rad), [`rot_zyx`] as a quaternion.
 pub(crate) fn quat_zyx(a: f64, b: f64, c: f64) -> fm::Quaternion {
-    let (sa, ca) = (a / 2.0).sin_cos();
-    let (sb, cb) = (b / 2.0).sin_cos();
-    let (sc, cc) = (c / 2.0).sin_cos();
-    let qz = fm::Quaternion { x: 0.0, y: 0.0, z: sa, w: ca };
-    let qy = fm::Quaternion { x: 0.0, y: sb, z: 0.0, w: cb };
-    let qx = fm::Quaternion { x: sc, y: 0.0, z: 0.0, w: cc };
-    qmul(qmul(qz, qy), qx)
+    let q = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(rot_zyx(a, b, c)));
+    fm::Quaternion { x: q.i, y: q.j, z: q.k, w: q.w }
 }
 
 /// The rotation taking +x onto `d` (identity for a zero vector).
@@ -226,13 +222,12 @@ mod tests {
     }
 
     #[test]
-    fn zyx_matches_the_motion_layer() {
+    fn zyx_is_the_geometry_rotation() {
         let (a, b, c) = (0.3, -0.2, 1.1);
-        let m = topspin_core::motion::limits::rot_zyx(a, b, c);
+        let m = rot_zyx(a, b, c);
         let q = quat_zyx(a, b, c);
         for v in [Vec3::x(), Vec3::y(), Vec3::z()] {
-            let mv = Vec3::from(std::array::from_fn(|i| (0..3).map(|j| m[i][j] * v[j]).sum::<f64>()));
-            assert!((rotate(q, v) - mv).norm() < 1e-12);
+            assert!((rotate(q, v) - m * v).norm() < 1e-12);
         }
     }
 

@@ -2,7 +2,7 @@
 //! samples with the fitted spin and without it, under the paper's physics
 //! and under calibrated physics; and the calibration itself (C_D, lift,
 //! e, μ) with the refined spin fit on all four sets. `topspin eval real`
-//! and `tests/real_data.rs` are thin shells over this module.
+//! and `crates/lab/tests/real_data.rs` are thin shells over this module.
 
 use serde_json::{Value, json};
 

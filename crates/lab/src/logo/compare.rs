@@ -13,7 +13,6 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::eval::fit::{Window, windowed};
-use crate::logo::eval::MIN_FRAMES;
 use topspin_cnn::{self as cnn, LogoCnn};
 use topspin_core::calib::Calibration;
 use topspin_core::calib::camera::CameraCalib;
@@ -24,7 +23,7 @@ use topspin_core::logo::pipeline::{CropInput, LogoMethod, process_sequence};
 use topspin_core::logo::rotation::{RotationFit, RotationFitConfig};
 use topspin_core::physics::{Vec3, rad_to_rps};
 use topspin_core::stats::Summary;
-use topspin_sim::render::{BallColour, Scene, Sequence, SequenceOptions, render_sequence};
+use topspin_sim::render::{BallColour, MIN_FILMED_FRAMES, Scene, Sequence, SequenceOptions, render_sequence};
 use topspin_sim::{Setting, SimBall, TrackerModel, simulate_ball};
 
 /// The sources compared, in table order.
@@ -74,7 +73,7 @@ fn film(cal: &Calibration, scene: &Scene, opts: &CompareOptions, k: usize, setti
     let tracker = TrackerModel { noise_sigma: opts.noise, ..TrackerModel::default() };
     let ball = simulate_ball(opts.seed, k, setting, &prop, cal.strike.hit_plane_x, &tracker).ok()?;
     let seq = render_sequence(scene, &ball.truth, &prop, opts.seed, k, &SequenceOptions { frames: opts.frames });
-    (seq.frames.len() >= MIN_FRAMES).then_some(Filmed { ball, seq })
+    (seq.frames.len() >= MIN_FILMED_FRAMES).then_some(Filmed { ball, seq })
 }
 
 fn trajectory_estimate(cal: &Calibration, b: &SimBall, noise: f64) -> Option<SpinEstimate> {

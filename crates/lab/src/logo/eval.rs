@@ -16,11 +16,8 @@ use topspin_core::logo::pipeline::{CropInput, LogoMethod, process_sequence};
 use topspin_core::logo::rotation::{LogoSample, RotationFitConfig, fit_rotation};
 use topspin_core::physics::{Vec3, rad_to_rps};
 use topspin_core::stats::Summary;
-use topspin_sim::render::{BallColour, Scene, SequenceOptions, render_sequence};
+use topspin_sim::render::{BallColour, MIN_FILMED_FRAMES, Scene, SequenceOptions, render_sequence};
 use topspin_sim::{Setting, TrackerModel, simulate_ball};
-
-/// Fewest frames for a sequence to count as filmed.
-pub const MIN_FRAMES: usize = 10;
 
 /// What to evaluate.
 #[derive(Clone, Debug)]
@@ -84,7 +81,7 @@ fn eval_ball(
     let cam = &scene.cam;
     let ball = simulate_ball(seed, k, setting, &prop, cal.strike.hit_plane_x, &TrackerModel::default()).ok()?;
     let seq = render_sequence(scene, &ball.truth, &prop, seed, k, &SequenceOptions { frames });
-    if seq.frames.len() < MIN_FRAMES {
+    if seq.frames.len() < MIN_FILMED_FRAMES {
         return None;
     }
     let inputs: Vec<CropInput<'_>> = seq.frames.iter().map(|f| f.crop_input()).collect();

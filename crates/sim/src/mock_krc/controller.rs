@@ -47,8 +47,8 @@
 use std::collections::VecDeque;
 use std::fmt;
 
+use topspin_core::geometry::unwrap_near;
 use topspin_core::kinematics::{AXES, Arm, Axis, Joints, LimitKind, LimitViolation, Pose, Unreachable};
-use topspin_core::motion::limits::unwrap_near;
 use topspin_core::rsi::codec::{CodecError, KukaPose, RobElement, RobFrame, SenFrame};
 use topspin_core::rsi::session::Correction;
 use topspin_core::time::Instant;

@@ -9,16 +9,14 @@
 //!   RKorr applied in #ABSOLUTE or #RELATIVE mode through POSCORR-style
 //!   limits and the robot's own velocity/acceleration limits, path log.
 //! - [`faults`]: drop, delay and duplicate answers — a wrapper around the
-//!   link, seeded, not `if`s in the core.
-//! - [`pair`]: the controller and the RSI session in one thread on a
-//!   virtual clock, with the same faults: exact, deterministic tests.
+//!   link, seeded, not `if`s in the core. [`crate::pair`] runs the
+//!   controller and the RSI session on one virtual clock with them.
 //! - [`runner`]: the UDP loop on an absolute 4 ms (or 12 ms) schedule, in
 //!   process on a thread (stop flag, result) or from the command line.
 
 pub mod config;
 pub mod controller;
 pub mod faults;
-pub mod pair;
 pub mod runner;
 
 pub use controller::{Brakes, CorrMode, MockController, PathSample, StopReason};

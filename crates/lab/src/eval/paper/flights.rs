@@ -23,7 +23,6 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use super::{Clock, PaperConfig, Progress, ball_index};
-use crate::logo::eval::MIN_FRAMES;
 use topspin_core::calib::Calibration;
 use topspin_core::calib::camera::CameraCalib;
 use topspin_core::fit::{FitConfig, Method, Sample, TrajectoryFit, fit_trajectory};
@@ -33,7 +32,7 @@ use topspin_core::logo::pipeline::LogoMethod;
 use topspin_core::logo::rotation::{LogoSample, RotationFit, RotationFitConfig, fit_rotation};
 use topspin_core::logo::view::BallView;
 use topspin_core::physics::Vec3;
-use topspin_sim::render::{BallColour, Scene, Sequence, SequenceOptions, render_sequence};
+use topspin_sim::render::{BallColour, MIN_FILMED_FRAMES, Scene, Sequence, SequenceOptions, render_sequence};
 use topspin_sim::{Setting, SimBall, simulate_ball};
 
 /// A way of estimating a flight's spin, as the rows of Table IV.
@@ -268,7 +267,7 @@ fn estimate_of<E: ToString>(r: Result<Vec3, E>) -> Estimate {
     }
 }
 
-/// One filmed flight; `None` when ball k is not filmed for `MIN_FRAMES`.
+/// One filmed flight; `None` when ball k is not filmed for `MIN_FILMED_FRAMES`.
 #[allow(clippy::too_many_arguments)]
 fn process(
     cal: &Calibration,
@@ -283,7 +282,7 @@ fn process(
     let cam = &scene.cam;
     let ball = simulate_ball(cfg.seed, k, setting, &prop, cal.strike.hit_plane_x, &cfg.tracker()).ok()?;
     let seq = render_sequence(scene, &ball.truth, &prop, cfg.seed, k, &SequenceOptions { frames: cfg.frames });
-    if seq.frames.len() < MIN_FRAMES {
+    if seq.frames.len() < MIN_FILMED_FRAMES {
         return None;
     }
     let (ms, bg_seconds) = bg_measurements(cam, &seq, clock)?;

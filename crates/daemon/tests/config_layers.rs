@@ -21,7 +21,7 @@ fn load(system: Option<&Path>, file: Option<&Path>, vars: &[(&str, &str)]) -> Re
 
 #[test]
 fn the_example_configuration_equals_the_compiled_defaults() {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("deploy/topspin.toml");
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../deploy/topspin.toml");
     let text = std::fs::read_to_string(&path).unwrap();
     // Parsed alone (serde, deny_unknown_fields: every key present, none unknown) ...
     let alone: DaemonConfig = toml::from_str(&text).unwrap();

@@ -15,7 +15,7 @@ use topspin_lab::data::frame::{BALL_RADIUS, BounceSearch, MPI_LAB_TO_TABLE, dete
 use topspin_lab::data::mpi::{RealTrajectory, SETS, load, locate, sampling_stats};
 
 fn data() -> Option<Vec<RealTrajectory>> {
-    let Some(dir) = locate(Path::new(env!("CARGO_MANIFEST_DIR"))) else {
+    let Some(dir) = locate(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")) else {
         eprintln!(
             "note: MPI launcher data not found (set TOPSPIN_MPI_DATA or place shared/ beside the repo); skipping"
         );

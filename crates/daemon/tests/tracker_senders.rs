@@ -20,7 +20,7 @@ use topspin_daemon::runtime::daemon::{Daemon, RuntimeConfig};
 const COUNT: u64 = 120;
 
 fn tools() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("tools/tracker")
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tools/tracker")
 }
 
 /// The C sender built from `send_example.c` and `ttb1.h`.

@@ -96,7 +96,8 @@ fn rsi_requests_from_a_foreign_address_or_oversized_are_not_answered() {
 
 #[test]
 fn default_configuration_binds_loopback_and_names_its_peers() {
-    for cfg in [DaemonConfig::default(), DaemonConfig::from_toml(include_str!("../deploy/topspin.toml")).unwrap()] {
+    for cfg in [DaemonConfig::default(), DaemonConfig::from_toml(include_str!("../../../deploy/topspin.toml")).unwrap()]
+    {
         let n = &cfg.network;
         for bind in [n.tracker_bind, n.rsi_bind] {
             assert!(!bind.ip().is_unspecified(), "{bind} listens on every interface");
