@@ -9,18 +9,31 @@ use foxglove::messages as fm;
 #[derive(Copy, Clone, Debug, PartialEq, Eq)]
 #[repr(usize)]
 pub enum Topic {
+    /// `/view/cell`: the table, the robot base, its workspace and the hitting window.
     Cell,
+    /// `/tf`: the transform from the `table` frame to `robot_base`.
     Tf,
+    /// `/view/ball`: the observations, the EKF estimate, the predicted path, spin and logo.
     Ball,
+    /// `/view/robot`: the planned bat, the actual and commanded arm and TCP.
     Robot,
+    /// `/view/plan_pose`: the planned bat pose in the `table` frame.
     PlanPose,
+    /// `/view/tcp`: the actual and commanded TCP poses in `robot_base`.
     Tcp,
+    /// `/view/verdict`: hit or miss per ball (the demo only).
     Verdict,
+    /// `/plot/spin`: the EKF spin per observation.
     Spin,
+    /// `/plot/prediction_error`: each plan's error when a ball ends.
     PredictionError,
+    /// `/plot/rsi`: latency and counters per RSI answer.
     Rsi,
+    /// `/plot/queues`: the depths of the telemetry queues.
     Queues,
+    /// `/logo/crop`: the logo thread's crop image.
     LogoCrop,
+    /// `/logo/fit`: the ball and the detected logo drawn on the crop.
     LogoFit,
 }
 

@@ -32,16 +32,36 @@ pub(crate) const MAX_CORE: usize = 1023;
 pub enum ConfigError {
     /// A configuration file could not be read.
     #[error("cannot read {path}: {message}")]
-    Read { path: PathBuf, message: String },
+    Read {
+        /// The file.
+        path: PathBuf,
+        /// Why it could not be read.
+        message: String,
+    },
     /// A configuration file is not valid TOML.
     #[error("{path}: {message}")]
-    Syntax { path: PathBuf, message: String },
+    Syntax {
+        /// The file.
+        path: PathBuf,
+        /// The TOML parser's message.
+        message: String,
+    },
     /// A layer (file or environment) names a key no section knows.
     #[error("{origin}: unknown key `{key}`")]
-    UnknownKey { origin: String, key: String },
+    UnknownKey {
+        /// The file or environment variable that names the key.
+        origin: String,
+        /// The unknown key.
+        key: String,
+    },
     /// A key's value has the wrong type or is out of range.
     #[error("{key}: {message}")]
-    Invalid { key: String, message: String },
+    Invalid {
+        /// The key (`section.key`), or the section.
+        key: String,
+        /// What is wrong with it.
+        message: String,
+    },
     /// Anything else the merge reported.
     #[error("configuration: {0}")]
     Merge(String),
@@ -153,14 +173,21 @@ fn ip_addr<'de, D: Deserializer<'de>>(d: D) -> Result<IpAddr, D::Error> {
 pub struct ThreadsConfig {
     /// SCHED_FIFO and mlockall where permitted (a warning where not).
     pub realtime: bool,
+    /// The CPU the ingest thread is pinned to, or none.
     pub ingest_core: Core,
+    /// The CPU the estimator thread is pinned to, or none.
     pub estimator_core: Core,
+    /// The CPU the RSI thread is pinned to, or none.
     pub rsi_core: Core,
+    /// The CPU the telemetry thread is pinned to, or none.
     pub telemetry_core: Core,
-    /// SCHED_FIFO priorities, 1..=99.
+    /// The RSI thread's SCHED_FIFO priority, 1..=99.
     pub rsi_priority: u8,
+    /// The ingest thread's SCHED_FIFO priority, 1..=99.
     pub ingest_priority: u8,
+    /// The estimator thread's SCHED_FIFO priority, 1..=99.
     pub estimator_priority: u8,
+    /// How the RSI thread waits for the controller's next datagram.
     pub rsi_wait: RsiWait,
 }
 
@@ -249,6 +276,7 @@ pub struct TelemetryConfig {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct RecordingConfig {
+    /// Record the session to an MCAP file.
     pub enabled: bool,
     /// Folder the session files are written to.
     pub dir: PathBuf,
@@ -269,6 +297,7 @@ pub enum LogoMethodConfig {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct LogoConfig {
+    /// Run the logo thread.
     pub enabled: bool,
     /// Where the logo thread receives TTI1 crop datagrams.
     #[serde(deserialize_with = "socket_addr")]
@@ -276,6 +305,7 @@ pub struct LogoConfig {
     /// Only crops from this IP are accepted.
     #[serde(deserialize_with = "ip_addr")]
     pub crops_source: IpAddr,
+    /// How the logo is found in a crop.
     pub method: LogoMethodConfig,
     /// The ONNX model; empty: `models/logo-compact.onnx` (see README).
     pub model: PathBuf,
@@ -321,19 +351,27 @@ impl CalibConfig {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct DaemonConfig {
+    /// `[network]`.
     pub network: NetworkConfig,
+    /// `[threads]`.
     pub threads: ThreadsConfig,
+    /// `[tracker]`.
     pub tracker: TrackerConfig,
     /// Absent in recordings made before it existed.
     #[serde(default)]
     pub estimator: EstimatorSection,
+    /// `[rsi]`.
     pub rsi: RsiConfig,
+    /// `[telemetry]`.
     pub telemetry: TelemetryConfig,
+    /// `[recording]`.
     pub recording: RecordingConfig,
     /// Absent in recordings made before it existed.
     #[serde(default)]
     pub viewer: ViewerConfig,
+    /// `[calib]`.
     pub calib: CalibConfig,
+    /// `[logo]`.
     pub logo: LogoConfig,
 }
 

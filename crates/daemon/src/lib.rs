@@ -22,6 +22,9 @@
 //!
 //! `DESIGN §n` in these docs cites section n of `docs/design.md`.
 
+#![warn(missing_docs)]
+#![deny(unreachable_pub)]
+
 pub mod calib_files;
 pub mod channels;
 pub mod clock;

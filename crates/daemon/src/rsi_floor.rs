@@ -66,6 +66,7 @@ impl FloorServer {
         Ok(FloorServer { socket, wait, rx: [0; MAX_REQUEST_LEN + 1], tx: [0; ANSWER_CAP], answer_ns, unanswerable: 0 })
     }
 
+    /// The address the socket is bound to.
     pub fn local_addr(&self) -> io::Result<SocketAddr> {
         self.socket.local_addr()
     }

@@ -24,7 +24,9 @@ pub(crate) const STOP_POLL: std::time::Duration = std::time::Duration::from_mill
 /// How the loop waits for the next datagram.
 #[derive(Copy, Clone, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum WaitStrategy {
+    /// A blocking receive with a timeout of [`STOP_POLL`].
     Blocking,
+    /// Spin on a non-blocking socket.
     BusyPoll,
 }
 
@@ -90,6 +92,7 @@ impl PlanReader {
 /// What the loop reports besides answering: session events, and every
 /// exchange with its timing (for telemetry and recording).
 pub trait RsiSink {
+    /// One event of the session.
     fn event(&mut self, e: SessionEvent);
     /// One answered request: arrival of the request, the bytes both ways,
     /// and when the answer left.
@@ -152,14 +155,17 @@ impl RsiServer {
         self.oversized
     }
 
+    /// The address the socket is bound to.
     pub fn local_addr(&self) -> io::Result<SocketAddr> {
         self.socket.local_addr()
     }
 
+    /// The RSI session the loop drives.
     pub fn session(&self) -> &RsiSession {
         &self.session
     }
 
+    /// Ends the loop, giving back its RSI session.
     pub fn into_session(self) -> RsiSession {
         self.session
     }

@@ -11,6 +11,9 @@
 //!
 //! `DESIGN §n` in these docs cites section n of `docs/design.md`.
 
+#![warn(missing_docs)]
+#![deny(unreachable_pub)]
+
 pub mod data;
 pub mod eval;
 pub mod logo;

@@ -54,11 +54,15 @@ pub(crate) const LEAD_IN: f64 = 0.5;
 /// How the demo runs.
 #[derive(Clone, Debug, PartialEq)]
 pub struct DemoConfig {
+    /// Balls to launch.
     pub balls: usize,
+    /// Seed of every random stream of the run (flights, tracker, faults).
     pub seed: u64,
+    /// The simulated tracker: sampling, noise, latency, dropouts and false detections.
     pub tracker: TrackerModel,
     /// Launch-to-launch gap, s.
     pub gap: f64,
+    /// The daemon's runtime configuration (addresses, threads, estimator, logo).
     pub runtime: RuntimeConfig,
     /// The mock's answer deadline; `None`: the controller's (one cycle).
     /// Tests on a shared machine stretch it so that the machine's own
@@ -130,10 +134,15 @@ impl Default for DemoConfig {
 /// The verdict on one ball.
 #[derive(Clone, Debug, Serialize)]
 pub struct BallVerdict {
+    /// The ball's position in the run's list of balls (0-based).
     pub ball: usize,
+    /// The launcher setting the ball was launched with or resembles (e.g. `topspin-low`).
     pub setting: String,
+    /// The true spin before the bounce, rps, table frame.
     pub true_spin_rps: [f64; 3],
+    /// The spin of the last plan matched to this ball, rps (`None`: no plan).
     pub estimated_spin_rps: Option<[f64; 3]>,
+    /// Error of that spin, |estimated − true| / |true|, % (`None`: no plan).
     pub spin_err_pct: Option<f64>,
     /// Closest approach of the bat centre to the ball within the window, mm.
     pub hit_err_mm: Option<f64>,
@@ -142,10 +151,13 @@ pub struct BallVerdict {
     /// estimation; and the bat at the plan's hitting time against the
     /// plan's point (mm) — execution.
     pub plan_err_mm: Option<f64>,
+    /// The last plan's hitting time minus the true one, ms (> 0: the plan late).
     pub plan_dt_ms: Option<f64>,
+    /// Distance from the bat centre at the plan's hitting time to the plan's hitting point, mm.
     pub tracking_err_mm: Option<f64>,
     /// The true hitting point lies inside the hitting window.
     pub reachable: bool,
+    /// The bat centre came within [`HIT_RADIUS`] of the ball within ±[`HIT_WINDOW`] of its crossing.
     pub hit: bool,
     /// The return: over the net onto the opponent's half, judged on the
     /// bat's actual pose and velocity where it met the ball.
@@ -153,6 +165,7 @@ pub struct BallVerdict {
     /// Why not (`None` when returned), and what was wrong: the bat's
     /// angle, speed, timing or position.
     pub return_fail: Option<ReturnFail>,
+    /// The failure in words (`None` when returned).
     pub return_why: Option<String>,
     /// The bat and the ball at their contact (`None`: no contact).
     pub contact: Option<ContactReport>,
@@ -167,8 +180,11 @@ pub struct BallVerdict {
 /// The demo's result.
 #[derive(Clone, Debug, Serialize)]
 pub struct DemoReport {
+    /// Balls launched in the run.
     pub balls: usize,
+    /// Balls judged reachable ([`BallVerdict::reachable`]).
     pub reachable: usize,
+    /// Reachable balls the bat hit ([`BallVerdict::hit`]).
     pub hits: usize,
     /// Hits over reachable balls.
     pub hit_rate: f64,
@@ -186,29 +202,40 @@ pub struct DemoReport {
     /// The same per stroke type and speed band (the setting a ball is or
     /// resembles, e.g. `topspin-low`).
     pub by_setting: std::collections::BTreeMap<String, SettingTally>,
+    /// Cycles the mock KR C4 closed without a valid answer by its deadline.
     pub late_rsi_answers: u64,
     /// Answers accepted under a stretched deadline that came later than
     /// one cycle (0 unless `answer_deadline` was stretched).
     pub answers_after_cycle: u64,
+    /// RSI cycles the mock KR C4 ran.
     pub rsi_cycles: u64,
+    /// Median spin error over the reachable balls with a plan, %.
     pub spin_err_pct_median: f64,
+    /// Median closest approach of the bat centre to the ball over the reachable balls, mm.
     pub hit_err_mm_median: f64,
     /// How much earlier and later the returned balls could have come and
     /// still been returned by the same strokes, ms (medians; each side
     /// capped at [`crate::returns::TIMING_SPAN_MS`]).
     pub timing_tolerance_ms_median: [f64; 2],
+    /// The daemon's latency percentiles (RSI answer, observation to plan), µs.
     pub latency_us: Latencies,
+    /// The RSI loop ended with the bat home (or no robot was there).
     pub ended_home: bool,
     /// Plans the RSI loop took that arrive late (and the worst, ms), and
     /// plans it refused.
     pub plans_late: u64,
+    /// How late the latest of those plans arrived, ms.
     pub late_by_max_ms: f64,
+    /// Plans the RSI loop refused.
     pub plans_rejected: u64,
     /// The logo thread's counters (with `runtime.logo`), and the logo
     /// spins the estimator fused or refused.
     pub logo: Option<LogoCounters>,
+    /// Logo spins the estimator fused into a track.
     pub logo_spins_fused: u64,
+    /// Logo spins the estimator's χ² gate refused.
     pub logo_spins_gated: u64,
+    /// The real-time requests the OS refused the daemon's threads, in words.
     pub warnings: Vec<String>,
     /// The daemon's tracker ingest counters (foreign, malformed, …).
     pub ingest: IngestCounters,
@@ -217,15 +244,18 @@ pub struct DemoReport {
     /// Where the balls came from, and the human strokes passed over
     /// because they never reached the robot's half (not balls of the run).
     pub strokes: Strokes,
+    /// The human strokes passed over, by reason.
     pub strokes_out_of_play: Redraws,
     /// Corrections the mock KR C4 had to clamp (POSCORR), and whether its
     /// monitor stopped RSI: zero and false unless the daemon commanded
     /// something out of bounds.
     pub poscorr_clamped: u64,
+    /// The mock's correction monitor (POSCORRMON) stopped RSI.
     pub stopped_by_monitor: bool,
     /// The robot: its servo, whether the daemon compensated it, how it
     /// stopped (if it did) and the balls the planner skipped.
     pub robot: RobotReport,
+    /// The verdict on each ball, in run order.
     pub per_ball: Vec<BallVerdict>,
 }
 
@@ -234,17 +264,20 @@ pub struct DemoReport {
 pub struct RobotReport {
     /// The mock's dead time and lag (`calib/robot.toml` `[servo]`).
     pub dead_time_ms: f64,
+    /// The mock's first-order lag time constant, ms.
     pub lag_ms: f64,
     /// The daemon compensated them.
     pub compensation: bool,
     /// The correction sent (`cartesian`: RKorr, `axis`: AKorr) and the
     /// cycles AXISCORR clamped (axis).
     pub correction: &'static str,
+    /// Cycles whose AKorr the mock's AXISCORR clamped (axis correction).
     pub axiscorr_clamped: u64,
     /// The smallest and largest AKorr per axis A1..A6, degrees (axis).
     pub akorr_range_deg: [[f64; 2]; 6],
     /// Controller stops (0 or 1: RSI ends with the first) and why.
     pub stops: u64,
+    /// Why the controller stopped, in words (`None`: it did not).
     pub stop_reason: Option<String>,
     /// Balls whose stroke the planner refused, by reason.
     pub skipped: std::collections::BTreeMap<String, u64>,
@@ -252,7 +285,9 @@ pub struct RobotReport {
     /// and the cycles with an axis over either (the mock counts them; a
     /// KR C4 would stop).
     pub peak_speed_share: f64,
+    /// The hardest any axis accelerated, as a share of its acceleration limit.
     pub peak_acceleration_share: f64,
+    /// Cycles with an axis over its speed or acceleration limit.
     pub rates_over: u64,
 }
 
@@ -302,7 +337,9 @@ pub struct OutOfReach {
 /// One setting's balls in a run: how many, how many reachable, returned.
 #[derive(Clone, Debug, Default, PartialEq, Eq, Serialize)]
 pub struct SettingTally {
+    /// Balls of this setting.
     pub balls: usize,
+    /// Of them, the reachable ones.
     pub reachable: usize,
     /// Returned, of all balls.
     pub returned: usize,
@@ -338,6 +375,7 @@ impl OutOfReach {
         o
     }
 
+    /// All balls out of reach.
     pub fn total(&self) -> usize {
         self.no_crossing + self.wide + self.low + self.high
     }
@@ -346,12 +384,17 @@ impl OutOfReach {
 /// What one loopback session produced, before judging.
 #[derive(Debug)]
 pub struct LoopbackRun {
+    /// The simulated balls, in launch order.
     pub balls: Vec<SimBall>,
     /// Launch of ball k, s after `t0`.
     pub starts: Vec<f64>,
+    /// The instant the launch times count from (process clock).
     pub t0: Instant,
+    /// The mock KR C4's result: its counters and the logged path.
     pub mock: mock_krc::MockResult,
+    /// The daemon's summary at its end.
     pub daemon: DaemonSummary,
+    /// What the tracker fault injector did (`None`: a clean stream).
     pub injected: Option<InjectedCounts>,
     /// Human strokes passed over (see [`DemoReport::strokes_out_of_play`]).
     pub redraws: Redraws,

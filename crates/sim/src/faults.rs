@@ -41,7 +41,7 @@ pub(crate) struct Planned {
 }
 
 impl Planned {
-    pub fn bytes(&self) -> &[u8] {
+    pub(crate) fn bytes(&self) -> &[u8] {
         &self.bytes[..self.len]
     }
 }
@@ -54,11 +54,13 @@ pub struct TrackerFaults {
     pub loss: f64,
     /// Bursts of silence (no datagram at all) per second, each `silence_len` s.
     pub silence_rate: f64,
+    /// Length of each silence, s.
     pub silence_len: f64,
     /// Observations sent twice.
     pub duplicate: f64,
     /// Observations sent `reorder_by` s late (after their successors).
     pub reorder: f64,
+    /// How late a reordered observation is sent, s.
     pub reorder_by: f64,
     /// Garbage datagrams per second (random bytes, some with the TTB1 magic).
     pub garbage_rate: f64,
@@ -70,6 +72,7 @@ pub struct TrackerFaults {
     /// The tracker's clock jumps by `clock_jump_by` s (capture times, not
     /// arrivals) for every datagram sent `clock_jump_at` s after the first.
     pub clock_jump_at: Option<f64>,
+    /// The jump added to capture times, s (see `clock_jump_at`).
     pub clock_jump_by: f64,
 }
 
@@ -115,14 +118,23 @@ impl TrackerFaults {
 /// What [`inject`] did.
 #[derive(Copy, Clone, Debug, Default, PartialEq, Eq, serde::Serialize)]
 pub struct InjectedCounts {
+    /// Datagrams in the clean plan.
     pub clean: u64,
+    /// Observations dropped at random (`loss`).
     pub lost: u64,
+    /// Observations dropped inside a silence.
     pub silenced: u64,
+    /// Observations sent twice.
     pub duplicated: u64,
+    /// Observations sent `reorder_by` late.
     pub reordered: u64,
+    /// Garbage datagrams added.
     pub garbage: u64,
+    /// Datagrams of the foreign ball added.
     pub foreign: u64,
+    /// Observations whose position was mirrored across the table.
     pub teleported: u64,
+    /// Observations whose capture time the clock jump shifted.
     pub clock_jumped: u64,
 }
 

@@ -29,30 +29,40 @@ use topspin_core::physics::{BallState, Event, Propagator, StopAt, Table, Vec3, r
 /// The kind of spin a setting puts on the ball.
 #[derive(Copy, Clone, Debug, PartialEq, Eq, Hash)]
 pub enum SpinType {
+    /// Backspin: about the horizontal axis across the flight, ω_y < 0.
     Backspin,
+    /// Sidespin: about the mostly vertical axis perpendicular to the velocity, either sign.
     Sidespin,
+    /// Topspin: about the horizontal axis across the flight, ω_y > 0.
     Topspin,
 }
 
 /// The launcher's power (speed and spin grow together).
 #[derive(Copy, Clone, Debug, PartialEq, Eq, Hash)]
 pub enum Power {
+    /// The lowest power: the slowest balls with the least spin.
     Low,
+    /// The middle power.
     Medium,
+    /// The highest power: the fastest balls with the most spin.
     High,
 }
 
 /// One of the nine launcher settings.
 #[derive(Copy, Clone, Debug, PartialEq, Eq, Hash)]
 pub struct Setting {
+    /// The kind of spin.
     pub spin: SpinType,
+    /// The power.
     pub power: Power,
 }
 
 /// A uniform range [lo, hi].
 #[derive(Copy, Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Range {
+    /// Lower end, in the quantity's unit.
     pub lo: f64,
+    /// Upper end, in the quantity's unit.
     pub hi: f64,
 }
 
@@ -120,6 +130,7 @@ impl Setting {
         ]
     };
 
+    /// The setting of `spin` at `power`.
     pub const fn new(spin: SpinType, power: Power) -> Self {
         Setting { spin, power }
     }
@@ -218,7 +229,9 @@ pub enum SpinAxis {
 /// One launched ball: its setting and its state at t = 0.
 #[derive(Copy, Clone, Debug, PartialEq)]
 pub struct Launch {
+    /// The setting the ball was drawn from.
     pub setting: Setting,
+    /// The ball's position (m), velocity (m/s) and spin (rad/s) at launch, table frame.
     pub state: BallState,
 }
 
@@ -227,7 +240,9 @@ pub struct Launch {
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 #[error("launcher setting {setting} found no valid shot in {attempts} draws (check physics, table and hit_plane_x)")]
 pub struct NoValidShot {
+    /// The setting that found no shot.
     pub setting: Setting,
+    /// Draws tried.
     pub attempts: usize,
 }
 

@@ -29,6 +29,9 @@
 //!
 //! `DESIGN §n` in these docs cites section n of `docs/design.md`.
 
+#![warn(missing_docs)]
+#![deny(unreachable_pub)]
+
 pub mod demo;
 pub mod faults;
 pub mod launcher;
@@ -128,7 +131,9 @@ pub(crate) fn ball_rngs(seed: u64, k: usize) -> (ChaCha8Rng, ChaCha8Rng) {
 pub struct SimBall {
     /// Index in the run.
     pub index: usize,
+    /// The ball's ground truth: its flight, bounce and hitting-plane crossing.
     pub truth: Truth,
+    /// What the tracker reported, in capture order (times in s from the ball's launch).
     pub observations: Vec<SimObservation>,
     /// The physics this ball flies: its world's, with its own drag and
     /// lift (what the judges fly it with).

@@ -30,9 +30,13 @@ pub(crate) const OP_MESSAGE_DATA: u8 = 0x01;
 /// What one channel delivered.
 #[derive(Clone, Debug, Default)]
 pub struct ChannelSeen {
+    /// The channel's `schemaName`, as advertised.
     pub schema_name: String,
+    /// The channel's message `encoding`, as advertised.
     pub encoding: String,
+    /// Messages received on it.
     pub messages: u64,
+    /// Bytes of those messages, frame headers not counted.
     pub bytes: u64,
     /// The first message's log time and bytes.
     pub first: Option<(u64, Vec<u8>)>,
@@ -43,6 +47,7 @@ pub struct ChannelSeen {
 pub struct ProbeReport {
     /// `name` of the server's `serverInfo`.
     pub server_name: String,
+    /// What each advertised channel delivered, by topic.
     pub channels: BTreeMap<String, ChannelSeen>,
     /// Binary frames that were not well-formed message data.
     pub malformed: u64,
@@ -58,9 +63,16 @@ impl ProbeReport {
 /// A probe failure.
 #[derive(Debug, thiserror::Error)]
 pub enum ProbeError {
+    /// No connection to the server before `stop` or the patience ran out.
     #[error("connecting to {addr}: {message}")]
-    Connect { addr: SocketAddr, message: String },
+    Connect {
+        /// The server's address.
+        addr: SocketAddr,
+        /// The last connect error.
+        message: String,
+    },
     #[error("protocol: {0}")]
+    /// The WebSocket or the server's messages failed (handshake, subprotocol, JSON).
     Protocol(String),
 }
 

@@ -57,11 +57,14 @@ pub(crate) const LOGO_EDGE: f64 = 0.03;
 /// The ball's colour.
 #[derive(Copy, Clone, Debug, PartialEq, Eq, Hash)]
 pub enum BallColour {
+    /// An orange ball.
     Orange,
+    /// A white ball.
     White,
 }
 
 impl BallColour {
+    /// Both colours.
     pub const ALL: [BallColour; 2] = [BallColour::Orange, BallColour::White];
 
     /// Linear albedo (R, G, B).
@@ -72,6 +75,7 @@ impl BallColour {
         }
     }
 
+    /// The colour's name, lower case (`orange`, `white`), as it parses.
     pub fn name(self) -> &'static str {
         match self {
             BallColour::Orange => "orange",
@@ -101,9 +105,11 @@ pub struct Conditions {
     pub light: Vec3,
     /// Ambient and key-light shares of the radiance.
     pub ambient: f64,
+    /// Share of the radiance from the key light, times the cosine of its incidence.
     pub key: f64,
     /// Sensor read noise (8-bit units) and shot-noise gain.
     pub read_noise: f64,
+    /// Shot-noise variance per unit of pixel value (8-bit units).
     pub shot_gain: f64,
 }
 
@@ -126,7 +132,9 @@ impl Conditions {
 /// The scene: camera, ball, light.
 #[derive(Clone, Debug)]
 pub struct Scene {
+    /// The ceiling camera's calibration.
     pub cam: CameraCalib,
+    /// The ball's colour.
     pub colour: BallColour,
     /// Sensor noise on (off gives the noise-free image, e.g. the
     /// background model).
@@ -138,7 +146,9 @@ pub struct Scene {
 /// Where the ball is and how it turns at one instant (table frame).
 #[derive(Copy, Clone, Debug, PartialEq)]
 pub struct BallPose {
+    /// Ball centre, m, table frame.
     pub pos: Vec3,
+    /// Ball velocity, m/s, table frame.
     pub vel: Vec3,
     /// Body → table.
     pub orientation: Rotation3<f64>,
@@ -151,8 +161,11 @@ pub struct BallPose {
 pub struct Crop {
     /// Top-left pixel on the full sensor.
     pub x0: i64,
+    /// Row of the top-left pixel on the full sensor.
     pub y0: i64,
+    /// Width, px.
     pub width: u32,
+    /// Height, px.
     pub height: u32,
     /// Row-major RGB8, width · height · 3 bytes.
     pub rgb: Vec<u8>,
@@ -186,7 +199,9 @@ pub struct FrameLabel {
 /// One rendered frame.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Frame {
+    /// The rendered crop.
     pub crop: Crop,
+    /// Its ground truth.
     pub label: FrameLabel,
 }
 
@@ -222,11 +237,15 @@ impl Frame {
 /// The frames of one ball, consecutive camera frames before its bounce.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Sequence {
+    /// The ball's index `k` in the run.
     pub ball: usize,
+    /// The ball's launcher setting.
     pub setting: Setting,
+    /// The ball's colour.
     pub colour: BallColour,
     /// True spin before the bounce, rad/s, table frame.
     pub spin_table: Vec3,
+    /// The frames, in capture order.
     pub frames: Vec<Frame>,
 }
 
@@ -241,10 +260,12 @@ impl Sequence {
 }
 
 impl Scene {
+    /// A scene under the default [`Conditions`], with sensor noise.
     pub fn new(cam: CameraCalib, colour: BallColour) -> Self {
         Self::with_conditions(cam, colour, Conditions::default())
     }
 
+    /// A scene under `conditions`, with sensor noise.
     pub fn with_conditions(cam: CameraCalib, colour: BallColour, conditions: Conditions) -> Self {
         let light_c = cam.table_from_camera.inverse_transform_vector(&conditions.light.normalize());
         Scene { cam, colour, noise: true, conditions, light_c }

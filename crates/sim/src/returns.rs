@@ -101,6 +101,7 @@ pub struct ContactReport {
     pub returning_tilt_deg: Option<[f64; 2]>,
     /// The ball's speed just before and just after the contact, m/s.
     pub ball_in_mps: f64,
+    /// The ball's speed just after the contact, m/s.
     pub ball_out_mps: f64,
     /// The ball's spin just after the contact, rps.
     pub spin_out_rps: [f64; 3],
@@ -113,6 +114,7 @@ pub struct ContactReport {
 pub struct ReturnJudgement {
     /// `None`: over the net onto the opponent's half.
     pub fail: Option<ReturnFail>,
+    /// The bat and the ball at their contact (`None`: no contact).
     pub contact: Option<ContactReport>,
     /// Where the return first came down to the table's height (x, y), m.
     pub landing: Option<[f64; 2]>,
@@ -502,10 +504,15 @@ pub fn judge_return(
 /// Counts of failed returns by reason.
 #[derive(Copy, Clone, Debug, Default, PartialEq, Eq, Serialize)]
 pub struct ReturnFails {
+    /// The bat's face never met the ball.
     pub no_contact: usize,
+    /// Returns that touched the net.
     pub net: usize,
+    /// Returns that came down on the robot's side of the net (or flew backwards).
     pub short: usize,
+    /// Returns that passed the opponent's end of the table.
     pub long: usize,
+    /// Returns that passed beside the table.
     pub wide: usize,
 }
 

@@ -15,6 +15,7 @@ use topspin_daemon::clock;
 /// What a stream sent.
 #[derive(Copy, Clone, Debug, Default, PartialEq, Eq)]
 pub struct StreamStats {
+    /// Datagrams sent.
     pub sent: u64,
     /// Datagrams nobody received (ICMP port unreachable): a tracker does
     /// not stop for that.

@@ -44,6 +44,7 @@ pub enum Strokes {
 }
 
 impl Strokes {
+    /// Every source, in declaration order.
     pub const ALL: [Strokes; 5] =
         [Strokes::Launcher, Strokes::AimedLauncher, Strokes::HumanRally, Strokes::HumanServe, Strokes::Human];
 
@@ -107,6 +108,7 @@ pub struct HumanState {
     pub id: u32,
     /// A serve (else a rally stroke).
     pub serve: bool,
+    /// The ball's position (m), velocity (m/s) and spin (rad/s) right after the stroke, table frame.
     pub state: BallState,
 }
 
@@ -224,9 +226,13 @@ pub fn resembles(s: &BallState) -> Setting {
 /// What drawing a human ball cost: the states passed over, by reason.
 #[derive(Clone, Debug, Default, PartialEq, Eq, serde::Serialize)]
 pub struct Redraws {
+    /// States that met the net.
     pub net: usize,
+    /// States that passed the robot's end without a bounce on its half.
     pub long: usize,
+    /// States that left the table at a side.
     pub wide: usize,
+    /// Serves that did not bounce on the server's half first.
     pub serve: usize,
 }
 

@@ -59,7 +59,9 @@ pub struct VirtualRun {
     /// The logo stream's counters (with `runtime.logo`), and the logo
     /// spins the estimator fused and refused at its gate.
     pub logo: Option<LogoCounters>,
+    /// Logo spins the estimator fused into a track.
     pub logo_spins_fused: u64,
+    /// Logo spins the estimator's χ² gate refused.
     pub logo_spins_gated: u64,
     /// Every stroke judged on the truth.
     pub per_ball: Vec<BallVerdict>,

@@ -17,7 +17,9 @@ use super::sysfs::SysRoot;
 /// A resource limit; `None` is unlimited.
 #[derive(Copy, Clone, Debug, PartialEq, Eq)]
 pub struct Limit {
+    /// The soft limit, the one in force.
     pub soft: Option<u64>,
+    /// The hard limit, the ceiling for the soft one.
     pub hard: Option<u64>,
 }
 
@@ -26,6 +28,7 @@ pub struct Limit {
 pub struct Interface {
     /// The kernel's name (`eth0`, `enp3s0`, `lo`).
     pub name: String,
+    /// The address.
     pub addr: IpAddr,
     /// The netmask's length in bits.
     pub prefix_len: u8,

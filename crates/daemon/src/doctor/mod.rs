@@ -89,6 +89,7 @@ impl Status {
 pub struct Check {
     /// One of [`CHECKS`].
     pub name: &'static str,
+    /// The check's verdict.
     pub status: Status,
     /// What was found, one line.
     pub detail: String,
@@ -172,8 +173,11 @@ impl Findings {
 /// How many checks ended in each status.
 #[derive(Copy, Clone, Debug, Default, PartialEq, Eq, Serialize)]
 pub struct Summary {
+    /// Checks that passed.
     pub pass: usize,
+    /// Checks that warned.
     pub warn: usize,
+    /// Checks that failed.
     pub fail: usize,
 }
 
@@ -181,7 +185,9 @@ pub struct Summary {
 /// `topspin doctor --json`).
 #[derive(Clone, Debug, PartialEq, Eq, Serialize)]
 pub struct Report {
+    /// The checks' results, in [`CHECKS`] order.
     pub checks: Vec<Check>,
+    /// The count per status.
     pub summary: Summary,
 }
 
@@ -260,7 +266,7 @@ pub(crate) mod fake {
 
     impl Fake {
         /// An empty tree; unlimited limits, only loopback, clock synced.
-        pub fn new() -> Fake {
+        pub(crate) fn new() -> Fake {
             let dir = tempfile::tempdir().unwrap();
             let host = Host {
                 root: SysRoot::new(dir.path()),
@@ -274,7 +280,7 @@ pub(crate) mod fake {
         }
 
         /// Writes `abs` (e.g. `/proc/cmdline`) under the root.
-        pub fn file(&self, abs: &str, text: &str) -> &Self {
+        pub(crate) fn file(&self, abs: &str, text: &str) -> &Self {
             let p = self.dir.path().join(abs.trim_start_matches('/'));
             std::fs::create_dir_all(p.parent().unwrap()).unwrap();
             std::fs::write(p, text).unwrap();
@@ -282,7 +288,7 @@ pub(crate) mod fake {
         }
 
         /// A symbolic link `abs` → `target` (relative to the link's folder, as sysfs has them).
-        pub fn link(&self, abs: &str, target: &str) -> &Self {
+        pub(crate) fn link(&self, abs: &str, target: &str) -> &Self {
             let p = self.dir.path().join(abs.trim_start_matches('/'));
             std::fs::create_dir_all(p.parent().unwrap()).unwrap();
             std::os::unix::fs::symlink(target, &p).unwrap();
@@ -290,7 +296,7 @@ pub(crate) mod fake {
         }
 
         /// `cpuN` for N in `cpus` online, each its own SMT thread.
-        pub fn cpus(&self, n: usize) -> &Self {
+        pub(crate) fn cpus(&self, n: usize) -> &Self {
             self.file("/sys/devices/system/cpu/online", &format!("0-{}\n", n - 1));
             for c in 0..n {
                 self.file(&format!("/sys/devices/system/cpu/cpu{c}/topology/thread_siblings_list"), &format!("{c}\n"));

@@ -51,12 +51,17 @@ pub struct ProbeResult {
     /// Deadlines in the run: each was woken for (`samples`) or passed
     /// while the thread was still late for an earlier one (`missed`).
     pub deadlines: u64,
+    /// Deadlines the thread was woken for.
     pub samples: u64,
+    /// Deadlines that passed while the thread was late for an earlier one.
     pub missed: u64,
-    /// Lateness of the wake-ups, ns.
+    /// The median lateness of the wake-ups, ns.
     pub p50_ns: u64,
+    /// The 99th percentile of the wake-ups' lateness, ns.
     pub p99_ns: u64,
+    /// The 99.9th percentile of the wake-ups' lateness, ns.
     pub p999_ns: u64,
+    /// The latest wake-up's lateness, ns.
     pub max_ns: u64,
     /// What the OS refused or the configuration left out, one line each.
     pub notes: Vec<String>,

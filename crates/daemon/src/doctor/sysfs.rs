@@ -22,7 +22,9 @@ pub struct SysRoot {
 /// absolute path (as on the PC, not the fake root) and the OS's reason.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Unreadable {
+    /// The absolute path on the PC.
     pub path: String,
+    /// The OS's reason.
     pub reason: String,
 }
 

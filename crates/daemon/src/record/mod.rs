@@ -94,13 +94,28 @@ pub(crate) const META_LOG_TIME_OFFSET: &str = "log_time_offset_ns";
 pub enum RecordError {
     /// The file could not be created, written or read.
     #[error("{path}: {source}")]
-    Io { path: String, source: std::io::Error },
+    Io {
+        /// The file or folder.
+        path: String,
+        /// The OS's error.
+        source: std::io::Error,
+    },
     /// The MCAP layer failed.
     #[error("{path}: MCAP: {message}")]
-    Mcap { path: String, message: String },
+    Mcap {
+        /// The recording's path.
+        path: String,
+        /// What the MCAP layer reported.
+        message: String,
+    },
     /// The file is not a topspin recording (a missing or bad part named).
     #[error("{path}: not a usable topspin recording: {message}")]
-    Invalid { path: String, message: String },
+    Invalid {
+        /// The recording's path (`recorded calibration` for its calibration).
+        path: String,
+        /// What is missing or bad.
+        message: String,
+    },
     /// A calibration file name that cannot be recorded.
     #[error("calibration file name {0:?} is not a plain file name")]
     BadCalibName(String),
@@ -200,7 +215,7 @@ pub(crate) struct DatagramMsg {
 }
 
 impl DatagramMsg {
-    pub fn new(arrival: Instant, from: std::net::SocketAddr, bytes: &[u8]) -> Self {
+    pub(crate) fn new(arrival: Instant, from: std::net::SocketAddr, bytes: &[u8]) -> Self {
         let observation = Observation::parse(bytes).ok().map(|o| ObservationMsg {
             seq: o.seq,
             capture_ns: o.capture.as_nanos(),
@@ -334,7 +349,7 @@ fn text_or_hex(bytes: &[u8]) -> (Option<String>, Option<String>) {
 }
 
 impl RsiMsg {
-    pub fn new(arrival: Instant, request: &[u8], answer: &[u8], sent: Instant) -> Self {
+    pub(crate) fn new(arrival: Instant, request: &[u8], answer: &[u8], sent: Instant) -> Self {
         let (request, request_hex) = text_or_hex(request);
         let (answer, answer_hex) = text_or_hex(answer);
         RsiMsg { arrival_ns: arrival.as_nanos(), sent_ns: sent.as_nanos(), request, request_hex, answer, answer_hex }
@@ -364,6 +379,7 @@ impl RsiMsg {
 pub mod schema {
     pub(crate) const DATAGRAM: &str = r#"{"$schema":"https://json-schema.org/draft/2020-12/schema","title":"topspin.TrackerDatagram","description":"One UDP datagram from the tracker (TTB1, DESIGN 5.1) as it arrived","type":"object","properties":{"arrival_ns":{"type":"integer","description":"arrival, daemon monotonic clock, ns"},"from":{"type":"string","description":"sender IP:PORT"},"hex":{"type":"string","description":"the datagram's bytes, lower-case hex"},"observation":{"description":"decoded TTB1 fields, null if the datagram does not parse","anyOf":[{"type":"null"},{"type":"object","properties":{"seq":{"type":"integer"},"capture_ns":{"type":"integer","description":"tracker clock"},"x":{"type":"number"},"y":{"type":"number"},"z":{"type":"number"},"residual":{"type":["number","null"]},"cameras":{"type":"integer"},"valid":{"type":"boolean"}}}]}},"required":["arrival_ns","from","hex","observation"]}"#;
     pub(crate) const PLAN: &str = r#"{"$schema":"https://json-schema.org/draft/2020-12/schema","title":"topspin.StrikePlan","description":"A strike plan the estimator published; table frame, SI units; a null number is NaN or infinite (exact values in f64_bits)","type":"object","properties":{"seq":{"type":"integer"},"trajectory":{"type":"integer"},"made_at_ns":{"type":"integer"},"hit_time_ns":{"type":"integer"},"lead_s":{"type":["number","null"]},"position":{"type":"object","properties":{"x":{"type":["number","null"]},"y":{"type":["number","null"]},"z":{"type":["number","null"]}},"required":["x","y","z"]},"velocity":{"type":"object","properties":{"x":{"type":["number","null"]},"y":{"type":["number","null"]},"z":{"type":["number","null"]}},"required":["x","y","z"]},"orientation":{"type":"object","properties":{"a":{"type":["number","null"]},"b":{"type":["number","null"]},"c":{"type":["number","null"]}},"required":["a","b","c"]},"spin":{"type":"object","properties":{"x":{"type":["number","null"]},"y":{"type":["number","null"]},"z":{"type":["number","null"]}},"required":["x","y","z"]},"confidence":{"type":["number","null"]},"f64_bits":{"type":"array","description":"IEEE bits of position xyz, velocity xyz, orientation abc, spin xyz, confidence (16 hex digits each)","items":{"type":"string"},"minItems":13,"maxItems":13}},"required":["seq","trajectory","made_at_ns","hit_time_ns","position","velocity","orientation","spin","confidence","f64_bits"]}"#;
+    /// The schema of [`TOPIC_RSI`]'s messages ([`RsiMsg`]).
     pub const RSI: &str = r#"{"$schema":"https://json-schema.org/draft/2020-12/schema","title":"topspin.RsiExchange","description":"One RSI exchange: the KR C4's datagram and our answer","type":"object","properties":{"arrival_ns":{"type":"integer"},"sent_ns":{"type":"integer"},"request":{"type":"string","description":"the controller's XML"},"request_hex":{"type":"string","description":"instead of request when not UTF-8"},"answer":{"type":"string","description":"our XML"},"answer_hex":{"type":"string","description":"instead of answer when not UTF-8"}},"required":["arrival_ns","sent_ns"]}"#;
     pub(crate) const COUNTERS: &str = r#"{"$schema":"https://json-schema.org/draft/2020-12/schema","title":"topspin.Counters","description":"The daemon's counters (ingest, estimator, rsi, rings), as the telemetry thread sends them","type":"object"}"#;
 }

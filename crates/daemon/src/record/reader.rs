@@ -19,17 +19,24 @@ use topspin_core::time::Instant;
 /// A tracker datagram as recorded.
 #[derive(Clone, Debug, PartialEq)]
 pub struct RecordedDatagram {
+    /// When it arrived, on the daemon's monotonic clock.
     pub arrival: Instant,
+    /// The sender.
     pub from: SocketAddr,
+    /// The datagram's bytes.
     pub bytes: Vec<u8>,
 }
 
 /// An RSI exchange as recorded.
 #[derive(Clone, Debug, PartialEq)]
 pub struct RecordedExchange {
+    /// When the controller's datagram arrived, on the daemon's monotonic clock.
     pub arrival: Instant,
+    /// The controller's datagram.
     pub request: Vec<u8>,
+    /// Our answer.
     pub answer: Vec<u8>,
+    /// When the answer was sent, on the daemon's monotonic clock.
     pub sent: Instant,
 }
 
@@ -42,9 +49,13 @@ pub struct Session {
     pub config: DaemonConfig,
     /// The calibration files `(name, TOML text)`.
     pub calib_files: Vec<(String, String)>,
+    /// Every tracker datagram, parsed or not.
     pub observations: Vec<RecordedDatagram>,
+    /// The strike plans the estimator published.
     pub plans: Vec<StrikePlan>,
+    /// The RSI exchanges.
     pub exchanges: Vec<RecordedExchange>,
+    /// The counters JSON objects, each at its log time on the monotonic clock.
     pub counters: Vec<(Instant, serde_json::Value)>,
     /// The file ended before its summary (a crash): it holds what was
     /// flushed, and this says why reading stopped.

@@ -19,25 +19,34 @@ pub struct Difference {
     /// The fields that differ (e.g. `position.x`, `seq`), or `missing` /
     /// `extra` when one side has no plan at that index.
     pub fields: Vec<String>,
-    /// Both plans, debug-formatted.
+    /// The recorded plan, debug-formatted (`None`: the recording has none at that index).
     pub recorded: Option<String>,
+    /// The replayed plan, debug-formatted (`None`: the replay made none at that index).
     pub replayed: Option<String>,
 }
 
 /// What a replay found.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct ReplayReport {
+    /// Tracker datagrams in the recording.
     pub datagrams: usize,
+    /// Datagrams the replay's ingest accepted.
     pub accepted: u64,
+    /// The replay's ingest counters.
     pub ingest: IngestCounters,
+    /// Plans in the recording.
     pub recorded_plans: usize,
+    /// Plans the replay made.
     pub replayed_plans: usize,
     /// Plans compared (both sides have them).
     pub compared: usize,
+    /// Compared plans that are bit for bit the same.
     pub identical: usize,
+    /// Compared plans that differ.
     pub different: usize,
     /// Plans on one side only (counted as different unless the file is truncated).
     pub unmatched: usize,
+    /// The first plan that differs, if one does.
     pub first_difference: Option<Difference>,
     /// Why the file ended early, if it did: plans beyond the shorter side
     /// are then not compared.

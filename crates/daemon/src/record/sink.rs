@@ -14,6 +14,7 @@ pub struct RecordingSink {
 }
 
 impl RecordingSink {
+    /// A sink that writes into `recorder`.
     pub fn new(recorder: Recorder) -> Self {
         RecordingSink { recorder: Some(recorder) }
     }

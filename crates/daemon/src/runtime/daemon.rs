@@ -62,24 +62,35 @@ pub static THREAD_START_HOOK: std::sync::OnceLock<fn(&'static str)> = std::sync:
 /// Per-thread core and real-time priority.
 #[derive(Copy, Clone, Debug, Default, PartialEq, Eq)]
 pub struct ThreadSpec {
+    /// The CPU to pin the thread to (`None`: not pinned).
     pub core: Option<usize>,
+    /// The SCHED_FIFO priority (`None`: normal scheduling).
     pub priority: Option<i32>,
 }
 
 /// Everything the threads need, already validated.
 #[derive(Clone, Debug, PartialEq)]
 pub struct RuntimeConfig {
+    /// Where the ingest thread receives tracker datagrams.
     pub tracker_bind: SocketAddr,
     /// Only datagrams from this address are accepted (`None`: any).
     pub tracker_source: Option<IpAddr>,
+    /// Where the RSI thread receives the controller's datagrams.
     pub rsi_bind: SocketAddr,
     /// Only requests from this address are answered (`None`: any).
     pub controller_source: Option<IpAddr>,
+    /// Lock the memory and give the hot threads their SCHED_FIFO priorities
+    /// (false: every thread runs with normal scheduling).
     pub realtime: bool,
+    /// The ingest thread's core and priority.
     pub ingest: ThreadSpec,
+    /// The estimator thread's core and priority.
     pub estimator: ThreadSpec,
+    /// The RSI thread's core and priority.
     pub rsi: ThreadSpec,
+    /// The telemetry thread's core (its priority is not used).
     pub telemetry: ThreadSpec,
+    /// How the RSI thread waits for the controller's next datagram.
     pub rsi_wait: WaitStrategy,
     /// The estimator spins on its ring instead of parking.
     pub estimator_busy_poll: bool,
@@ -87,8 +98,11 @@ pub struct RuntimeConfig {
     pub tracker_noise: f64,
     /// What the estimator learns across the session (`[estimator]`).
     pub learn: topspin_core::estimator::session::LearnConfig,
+    /// The tracker's capture → datagram latency, added to the clock mapping.
     pub tracker_fixed_latency: Duration,
+    /// `Type` of `<Sen>` in the answers.
     pub sentype: String,
+    /// Seconds between counter log lines.
     pub log_interval_s: f64,
     /// Push the RSI bytes to telemetry (for the recording).
     pub record_rsi: bool,
@@ -103,20 +117,31 @@ pub struct RuntimeConfig {
 /// The logo thread's settings.
 #[derive(Clone, Debug, PartialEq)]
 pub struct LogoRuntime {
+    /// Where the logo thread receives crop datagrams.
     pub bind: SocketAddr,
     /// Only crops from this address are accepted (`None`: any).
     pub source: Option<IpAddr>,
+    /// How the logo is found in a crop.
     pub method: LogoMethodChoice,
+    /// The ceiling camera's calibration.
     pub camera: CameraCalib,
     /// Capture → datagram latency of the camera side.
     pub camera_latency: Duration,
+    /// The logo thread's core (its priority is not used).
     pub thread: ThreadSpec,
 }
 
 /// How the logo thread finds the logo.
 #[derive(Clone, Debug, PartialEq)]
 pub enum LogoMethodChoice {
-    Cnn { model: std::path::PathBuf, backend: Backend },
+    /// The logo CNN.
+    Cnn {
+        /// The ONNX model file.
+        model: std::path::PathBuf,
+        /// The engine that runs it.
+        backend: Backend,
+    },
+    /// Background subtraction with the segment correction.
     Background,
 }
 
@@ -168,9 +193,13 @@ impl RuntimeConfig {
 #[derive(Copy, Clone, Debug, PartialEq, Eq)]
 #[repr(u8)]
 pub enum LinkState {
+    /// No RSI session has started.
     NoRobot = 0,
+    /// The arm is moving: a stroke, or on its way home.
     Moving = 1,
+    /// The bat is home.
     Home = 2,
+    /// The controller went silent with the bat away from home.
     Silent = 3,
     /// The controller went silent with the bat at home (RSI ended there).
     SilentHome = 4,
@@ -209,9 +238,13 @@ impl LinkState {
 /// What the daemon's run ended with.
 #[derive(Debug)]
 pub struct DaemonSummary {
+    /// What the telemetry thread saw.
     pub telemetry: TelemetrySummary,
+    /// The ingest thread's counters.
     pub ingest: IngestCounters,
+    /// The RSI session's statistics.
     pub session: SessionStats,
+    /// The real-time requests the OS refused.
     pub warnings: Vec<RtWarning>,
     /// The RSI loop ended with the bat home (or no robot was there).
     pub ended_home: bool,
@@ -225,7 +258,9 @@ pub struct Daemon {
     /// The logo thread's end of the crop ring to the viewer (present when
     /// the daemon has a sink; take it with `Option::take`).
     pub logo_tx: Option<TelemetryTx<LogoRecord>>,
+    /// The address the ingest thread's socket is bound to.
     pub tracker_addr: SocketAddr,
+    /// The address the RSI thread's socket is bound to.
     pub rsi_addr: SocketAddr,
     /// Where the logo thread receives crops, if it runs.
     pub crops_addr: Option<SocketAddr>,
@@ -403,6 +438,7 @@ impl Daemon {
         self.warnings.lock().unwrap_or_else(|e| e.into_inner()).clone()
     }
 
+    /// How the RSI link stands now.
     pub fn link_state(&self) -> LinkState {
         LinkState::from_u8(self.link.load(Ordering::Acquire))
     }

@@ -9,7 +9,9 @@ use std::fmt;
 /// One refused real-time request.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct RtWarning {
+    /// The thread's name (`ingest`, `rsi`, …), or `process` for the memory lock.
     pub thread: &'static str,
+    /// What was refused.
     pub what: RtRefused,
 }
 
@@ -17,11 +19,22 @@ pub struct RtWarning {
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub enum RtRefused {
     /// Pinning to the core failed (no such core, or not permitted).
-    Pin { core: usize },
+    Pin {
+        /// The core asked for.
+        core: usize,
+    },
     /// `pthread_setschedparam(SCHED_FIFO)` failed with this errno.
-    Fifo { priority: i32, errno: i32 },
+    Fifo {
+        /// The priority asked for.
+        priority: i32,
+        /// The OS's error number.
+        errno: i32,
+    },
     /// `mlockall` failed with this errno.
-    Mlock { errno: i32 },
+    Mlock {
+        /// The OS's error number.
+        errno: i32,
+    },
 }
 
 impl fmt::Display for RtWarning {

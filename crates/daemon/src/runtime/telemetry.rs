@@ -32,10 +32,13 @@ pub(crate) const RECORDED_RSI: usize = 1024;
 /// One received tracker datagram.
 #[derive(Copy, Clone, Debug)]
 pub struct DatagramRecord {
+    /// When it arrived, on the daemon's clock.
     pub arrival: Instant,
+    /// The sender.
     pub from: SocketAddr,
     /// Length on the wire (may exceed what is kept).
     pub len: u16,
+    /// Its first [`RECORDED_DATAGRAM`] bytes (see [`kept`](Self::kept)).
     pub bytes: [u8; RECORDED_DATAGRAM],
     /// The sequence number if accepted, otherwise why it was dropped.
     pub outcome: Result<u32, Dropped>,
@@ -51,37 +54,54 @@ impl DatagramRecord {
 /// One RSI exchange with its bytes (pushed only when recording).
 #[derive(Copy, Clone, Debug)]
 pub struct RsiRecord {
+    /// When the controller's request arrived, on the daemon's clock.
     pub arrival: Instant,
+    /// When the answer was sent, on the daemon's clock.
     pub sent: Instant,
+    /// Bytes of `request` used (at most [`RECORDED_RSI`]).
     pub request_len: u16,
+    /// The request's first bytes.
     pub request: [u8; RECORDED_RSI],
+    /// Bytes of `answer` used (at most [`RECORDED_RSI`]).
     pub answer_len: u16,
+    /// The answer's first bytes.
     pub answer: [u8; RECORDED_RSI],
 }
 
 /// An event from a hot thread.
 #[derive(Copy, Clone, Debug)]
 pub enum Telemetry {
+    /// A tracker datagram the ingest thread received.
     Datagram(DatagramRecord),
+    /// An event of the estimator.
     Estimator(EstimatorEvent),
     /// A plan published; `arrival` of the observation that made it.
     Plan {
+        /// The plan.
         plan: StrikePlan,
+        /// When the observation that made it arrived.
         arrival: Instant,
+        /// When the plan was published to the RSI thread.
         published: Instant,
     },
+    /// An event of the RSI session.
     Rsi(SessionEvent),
     /// One observation the estimator took (capture time on our clock,
     /// position in T) and, when it tracks a ball after it, the trajectory
     /// and its EKF state at that time (for the viewer).
     Observed {
+        /// The capture time, on our clock.
         capture: Instant,
+        /// The ball's position in the table frame, m.
         pos: Vec3,
+        /// The tracked trajectory's number and its EKF state, if a ball is tracked.
         track: Option<(u32, BallState)>,
     },
     /// One RSI answer: request arrival and answer sent.
     Answer {
+        /// When the request arrived.
         arrival: Instant,
+        /// When the answer was sent.
         sent: Instant,
     },
 }
@@ -101,9 +121,11 @@ pub(crate) const QUEUE_INTERVAL_S: f64 = 0.1;
 pub struct LogoRecord {
     /// Capture time of the crop.
     pub capture: Instant,
+    /// The ball's trajectory number (0 from the logo thread, which does not know it).
     pub trajectory: u32,
     /// Crop size, px (each at most [`LOGO_CROP_SIDE`]).
     pub width: u16,
+    /// Crop height, px (at most [`LOGO_CROP_SIDE`]).
     pub height: u16,
     /// Row-major pixels, `rgb8` (3 bytes a pixel), `width * height * 3` used.
     pub pixels: [u8; 3 * LOGO_CROP_SIDE * LOGO_CROP_SIDE],
@@ -145,8 +167,11 @@ impl<T> TelemetryTx<T> {
 
 /// Where the telemetry thread hands what it sees (the recording).
 pub trait TelemetrySink: Send {
+    /// Every tracker datagram received.
     fn datagram(&mut self, _d: &DatagramRecord) {}
+    /// Every plan published.
     fn plan(&mut self, _p: &StrikePlan) {}
+    /// Every RSI exchange with its bytes (only when the RSI bytes are pushed).
     fn rsi(&mut self, _r: &RsiRecord) {}
     /// Every event from the hot threads, after the calls above (the viewer).
     fn event(&mut self, _e: &Telemetry) {}
@@ -156,20 +181,28 @@ pub trait TelemetrySink: Send {
     fn queues(&mut self, _q: &QueueDepths, _at: Instant) {}
     /// Called at each log interval and at the end.
     fn counters(&mut self, _json: &serde_json::Value, _at: Instant) {}
+    /// Writes out what is buffered: about every [`FLUSH_INTERVAL_S`], after
+    /// each counters call, and at the end.
     fn flush(&mut self) {}
 }
 
 /// Percentiles of a latency histogram, µs.
 #[derive(Copy, Clone, Debug, Serialize)]
 pub struct Latency {
+    /// The median.
     pub p50: u64,
+    /// The 99th percentile.
     pub p99: u64,
+    /// The 99.9th percentile.
     pub p999: u64,
+    /// The largest value.
     pub max: u64,
+    /// How many values were recorded.
     pub n: u64,
 }
 
 impl Latency {
+    /// The percentiles of `h`.
     pub fn of(h: &hdrhistogram::Histogram<u64>) -> Self {
         Latency {
             p50: h.value_at_quantile(0.5),
@@ -184,7 +217,9 @@ impl Latency {
 /// Both latency histograms.
 #[derive(Copy, Clone, Debug, Serialize)]
 pub struct Latencies {
+    /// RSI request arrival → answer sent.
     pub rsi_answer: Latency,
+    /// Observation arrival → plan published.
     pub obs_to_plan: Latency,
 }
 
@@ -204,13 +239,19 @@ pub struct TelemetrySummary {
     pub rsi_answer_us: Histogram<u64>,
     /// The last plan of each trajectory, in order.
     pub last_plans: Vec<StrikePlan>,
+    /// Plans published.
     pub plans: u64,
+    /// Tracker datagrams received.
     pub datagrams: u64,
+    /// Trajectories the estimator started.
     pub trajectories: u64,
+    /// The controller's latest count of late answers (`<Delay>`).
     pub controller_late: u64,
+    /// RSI session events.
     pub rsi_events: u64,
     /// Plans the RSI loop took although they arrive late, and the worst.
     pub plans_late: u64,
+    /// The largest lateness of those plans, ms.
     pub late_by_max_ms: f64,
     /// Plans the RSI loop refused.
     pub plans_rejected: u64,
@@ -218,10 +259,13 @@ pub struct TelemetrySummary {
     /// reason ([`PlanRejected::key`](topspin_core::motion::PlanRejected::key)).
     pub skipped: std::collections::BTreeMap<String, u64>,
     skipped_trajectories: std::collections::BTreeSet<u32>,
+    /// Telemetry events dropped because a ring was full.
     pub telemetry_dropped: u64,
+    /// The ingest thread's counters, as last read.
     pub ingest: IngestCounters,
     /// Logo spins fused into a track, and refused by its χ² gate.
     pub logo_spins_fused: u64,
+    /// Logo spins refused by a track's χ² gate.
     pub logo_spins_gated: u64,
 }
 
@@ -249,6 +293,7 @@ impl TelemetrySummary {
         }
     }
 
+    /// The counters as the JSON object the periodic log line and the sink get.
     pub fn to_json(&self) -> serde_json::Value {
         serde_json::json!({
             "datagrams": self.datagrams,
@@ -281,6 +326,7 @@ fn us(from: Instant, to: Instant) -> u64 {
 /// What the telemetry thread drains and where it hands it.
 #[allow(missing_debug_implementations)] // holds a `dyn TelemetrySink`
 pub struct TelemetryInputs {
+    /// The hot threads' telemetry rings.
     pub rings: Vec<Consumer<Telemetry>>,
     /// RSI bytes, when recording.
     pub rsi_bytes: Option<Consumer<RsiRecord>>,
@@ -288,6 +334,7 @@ pub struct TelemetryInputs {
     pub logo: Option<Consumer<LogoRecord>>,
     /// Seconds between periodic logs.
     pub log_interval: f64,
+    /// Where what the thread sees is handed, if anywhere.
     pub sink: Option<Box<dyn TelemetrySink>>,
 }
 

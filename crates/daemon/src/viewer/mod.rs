@@ -104,10 +104,15 @@ pub(crate) struct PredictionErrorPlot {
 /// `/plot/rsi`.
 #[derive(Copy, Clone, Debug, Default, Serialize)]
 pub struct RsiPlot {
+    /// The latest answer's latency (request arrival → answer sent), µs.
     pub latency_us: u64,
+    /// The controller's latest count of late answers (`<Delay>`).
     pub controller_late: u64,
+    /// Answers slower than the budget so far.
     pub slow_answers: u64,
+    /// Plans taken although late so far.
     pub plans_late: u64,
+    /// Plans refused so far.
     pub plans_rejected: u64,
 }
 
@@ -116,19 +121,27 @@ pub struct RsiPlot {
 pub enum ViewerError {
     /// The WebSocket server could not bind or start.
     #[error("live view on {addr}: {message}")]
-    Start { addr: std::net::SocketAddr, message: String },
+    Start {
+        /// The address it was to serve on.
+        addr: std::net::SocketAddr,
+        /// Why it did not start.
+        message: String,
+    },
 }
 
 // Small geometry helpers (Foxglove's types from ours).
 
+/// Foxglove's vector of `p`.
 pub fn v3(p: topspin_core::physics::Vec3) -> fm::Vector3 {
     fm::Vector3 { x: p.x, y: p.y, z: p.z }
 }
 
+/// Foxglove's point at `p`.
 pub fn p3(p: topspin_core::physics::Vec3) -> fm::Point3 {
     fm::Point3 { x: p.x, y: p.y, z: p.z }
 }
 
+/// Foxglove's colour of red, green, blue and alpha, each 0..=1.
 pub fn color(r: f64, g: f64, b: f64, a: f64) -> fm::Color {
     fm::Color { r, g, b, a }
 }

@@ -48,9 +48,13 @@ const TCP_TRAIL: usize = 512;
 /// One ball's true hitting-plane crossing (the demo knows it).
 #[derive(Copy, Clone, Debug)]
 pub struct TrueHit {
+    /// The ball's index in the demo.
     pub ball: usize,
+    /// When it crosses, on the daemon's clock.
     pub t: Instant,
+    /// Where it crosses, table frame, m.
     pub pos: Vec3,
+    /// Its velocity there, table frame, m/s.
     pub vel: Vec3,
     /// Inside the hitting window.
     pub reachable: bool,

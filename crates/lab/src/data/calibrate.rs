@@ -29,6 +29,8 @@ pub enum CalibParam {
 }
 
 impl CalibParam {
+    /// The parameter's name in reports (its [`PhysicsParams`] field path, e.g.
+    /// `lift.c_m`).
     pub fn name(self) -> &'static str {
         match self {
             CalibParam::DragCoefficient => "drag_coefficient",
@@ -61,6 +63,8 @@ impl CalibParam {
         }
     }
 
+    /// The parameter's value in `p`; NaN for `s_half` when the lift model has
+    /// none.
     pub fn get(self, p: &PhysicsParams) -> f64 {
         match (self, p.lift) {
             (CalibParam::DragCoefficient, _) => p.drag_coefficient,
@@ -72,6 +76,9 @@ impl CalibParam {
         }
     }
 
+    /// Sets the parameter in `p` to `v`; does nothing where the lift model
+    /// lacks it (`s_half` of a constant lift, any lift parameter of a measured
+    /// curve).
     pub fn set(self, p: &mut PhysicsParams, v: f64) {
         match self {
             CalibParam::DragCoefficient => p.drag_coefficient = v,
@@ -174,7 +181,9 @@ fn med(mut v: Vec<f64>) -> f64 {
 pub struct CalibrationSetup {
     /// The starting point; fields not in `params` stay as they are.
     pub base: PhysicsParams,
+    /// The parameters searched, in the order of [`CalibrationResult::values`].
     pub params: Vec<CalibParam>,
+    /// What the search minimises.
     pub objective: Objective,
     /// Upper bound on objective evaluations.
     pub max_evals: usize,
@@ -213,14 +222,19 @@ pub struct CalibrationResult {
     pub params: PhysicsParams,
     /// (parameter, value) for each searched parameter.
     pub values: Vec<(CalibParam, f64)>,
+    /// Objective evaluations the search used.
     pub evaluations: usize,
-    /// Objective at the start and at the end, training and validation.
+    /// Objective on the training subset at the starting point, mm.
     pub train_before: f64,
+    /// Objective on the training subset at the best parameters, mm.
     pub train_after: f64,
+    /// Objective on the validation subset at the starting point, mm.
     pub validation_before: f64,
+    /// Objective on the validation subset at the best parameters, mm.
     pub validation_after: f64,
-    /// The full reports with the calibrated parameters.
+    /// The full report on the training subset with the calibrated parameters.
     pub train: Report,
+    /// The full report on the validation subset with the calibrated parameters.
     pub validation: Report,
 }
 

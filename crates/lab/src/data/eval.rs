@@ -43,6 +43,8 @@ impl Prediction {
 /// Anything that turns observations (table frame, increasing t) into a
 /// state to propagate. `None`: no prediction from these samples.
 pub trait Predictor {
+    /// The ball's state at the last of `samples` (time in s, position in m,
+    /// table frame), or `None` for no prediction.
     fn predict(&self, samples: &[(f64, Vec3)]) -> Option<Prediction>;
 }
 
@@ -90,7 +92,9 @@ pub(crate) fn cubic_state(samples: &[(f64, Vec3)]) -> Option<(Vec3, Vec3, f64)> 
 /// computed once.
 #[derive(Clone, Debug, PartialEq)]
 pub struct PreparedTrajectory {
+    /// The subset (`backspin`, `topspin`, `no_spin`, `robot_no_spin`).
     pub set: String,
+    /// The file number within the subset.
     pub index: usize,
     /// All samples, table frame.
     pub samples: Vec<(f64, Vec3)>,
@@ -137,6 +141,9 @@ pub(crate) const HORIZON: f64 = 0.3;
 pub(crate) const MIN_PRE_NET_SAMPLES: usize = 10;
 
 impl EvalConfig {
+    /// The default settings around `propagator`: horizon 0.3 s, at least 10
+    /// pre-net samples, interpolation across gaps of up to 0.03 s, the
+    /// predicted bounce searched for 2 s.
     pub fn new(propagator: Propagator) -> Self {
         EvalConfig {
             propagator,
@@ -151,7 +158,9 @@ impl EvalConfig {
 /// What happened to one trajectory.
 #[derive(Clone, Debug, PartialEq)]
 pub struct TrajectoryResult {
+    /// The subset the trajectory comes from.
     pub set: String,
+    /// The file number within the subset.
     pub index: usize,
     /// Pre-net samples handed to the predictor.
     pub samples_used: usize,
@@ -163,8 +172,9 @@ pub struct TrajectoryResult {
     pub real_bounce: Option<(f64, Vec3)>,
     /// (a) xy distance between the two contacts, mm.
     pub bounce_error_mm: Option<f64>,
-    /// Predicted and real positions at t_last + horizon.
+    /// Predicted position at t_last + horizon, table frame, m.
     pub predicted_ahead: Option<Vec3>,
+    /// Recorded position at t_last + horizon (interpolated), table frame, m.
     pub real_ahead: Option<Vec3>,
     /// (b) 3D distance at t_last + horizon, mm.
     pub ahead_error_mm: Option<f64>,
@@ -173,13 +183,19 @@ pub struct TrajectoryResult {
 /// Mean, median, sample standard deviation and count of errors, mm.
 #[derive(Copy, Clone, Debug, PartialEq)]
 pub struct Stats {
+    /// Number of values.
     pub count: usize,
+    /// Arithmetic mean (NaN when empty).
     pub mean: f64,
+    /// Median (NaN when empty).
     pub median: f64,
+    /// Sample standard deviation, divisor n − 1 (NaN with fewer than two
+    /// values).
     pub std: f64,
 }
 
 impl Stats {
+    /// The statistics of `v`.
     pub fn of(v: &[f64]) -> Self {
         let n = v.len();
         let mean = v.iter().sum::<f64>() / n as f64;
@@ -197,7 +213,9 @@ impl std::fmt::Display for Stats {
 /// The results of one group (a set, or all).
 #[derive(Clone, Debug, PartialEq)]
 pub struct GroupReport {
+    /// The set's name, or `all`.
     pub name: String,
+    /// Trajectories in the group.
     pub trajectories: usize,
     /// With enough pre-net samples.
     pub used: usize,
@@ -222,8 +240,11 @@ pub struct GroupReport {
 pub struct Report {
     /// The horizon of (b), s.
     pub horizon: f64,
+    /// One group per set present, in [`SETS`] order, then any other set names.
     pub sets: Vec<GroupReport>,
+    /// All sets pooled.
     pub all: GroupReport,
+    /// Every trajectory's result, in input order.
     pub results: Vec<TrajectoryResult>,
 }
 

@@ -81,8 +81,9 @@ pub struct DetectedBounce {
     pub t: f64,
     /// Ball centre at contact.
     pub pos: Vec3,
-    /// Velocity just before and just after, from the two local fits.
+    /// Velocity just before the contact, from the fit before it, m/s.
     pub vel_in: Vec3,
+    /// Velocity just after the contact, from the fit after it, m/s.
     pub vel_out: Vec3,
     /// Index of the lowest sample.
     pub sample: usize,
@@ -98,8 +99,9 @@ pub struct BounceSearch {
     pub surface_z: f64,
     /// A lowest sample must lie below surface + r + this, m.
     pub band: f64,
-    /// Samples fitted on each side (at most), and the fewest accepted.
+    /// Most samples fitted on each side.
     pub side_samples: usize,
+    /// Fewest samples on each side for a contact to be accepted.
     pub min_side_samples: usize,
     /// Samples farther than this from the sample next to the contact are
     /// not fitted, s.
@@ -117,6 +119,8 @@ impl BounceSearch {
         Self::at_surface(0.0)
     }
 
+    /// A search with the default settings for a surface at height `surface_z`
+    /// (m, in the samples' frame).
     pub fn at_surface(surface_z: f64) -> Self {
         BounceSearch {
             surface_z,
@@ -250,18 +254,22 @@ pub struct FrameEstimate {
     pub bounces: usize,
     /// Trajectories in which no contact was found (recording ends first).
     pub without_bounce: usize,
-    /// Surface height: median of (contact z − r), its standard error
-    /// (1.2533 σ/√n for a median) and the robust spread (1.4826 · MAD), m.
+    /// Surface height: median of (contact z − r), lab frame, m.
     pub surface_z: f64,
+    /// Standard error of `surface_z` (1.2533 σ/√n for a median, σ the
+    /// robust spread), m.
     pub surface_se: f64,
+    /// Robust spread of the contact heights (1.4826 · MAD), m.
     pub surface_spread: f64,
-    /// Least-squares plane through the contacts: slope along lab x and y
-    /// (rad); shows the tilt of the table and of the tracker's calibration.
+    /// Least-squares plane through the contacts: slope along lab x (rad);
+    /// shows the tilt of the table and of the tracker's calibration.
     pub slope_x: f64,
+    /// The same plane's slope along lab y, rad.
     pub slope_y: f64,
     /// Heading of the shots (atan2 of the horizontal velocity before the
-    /// bounce): median and spread (1.4826 · MAD), rad.
+    /// bounce): median, rad.
     pub heading: f64,
+    /// Spread of the headings (1.4826 · MAD), rad.
     pub heading_spread: f64,
     /// Range of lab x of the first bounces.
     pub bounce_x: (f64, f64),

@@ -51,25 +51,70 @@ impl RealTrajectory {
 pub enum MpiError {
     /// A file or folder could not be read.
     #[error("cannot read {path}: {source}")]
-    Io { path: PathBuf, source: std::io::Error },
+    Io {
+        /// The file or folder.
+        path: PathBuf,
+        /// The I/O error.
+        source: std::io::Error,
+    },
     /// The CSV layer failed (bad quoting, ragged row, invalid UTF-8).
     #[error("{path}: {source}")]
-    Csv { path: PathBuf, source: csv::Error },
+    Csv {
+        /// The file.
+        path: PathBuf,
+        /// The CSV reader's error.
+        source: csv::Error,
+    },
     /// A required column is not in the header.
     #[error("{path}: no column `{column}` in the header")]
-    MissingColumn { path: PathBuf, column: &'static str },
+    MissingColumn {
+        /// The file.
+        path: PathBuf,
+        /// The column's name.
+        column: &'static str,
+    },
     /// A field is missing, not a number, or not finite.
     #[error("{path}:{line}: `{column}` = {text:?} is not a finite number")]
-    BadValue { path: PathBuf, line: u64, column: &'static str, text: String },
+    BadValue {
+        /// The file.
+        path: PathBuf,
+        /// The line in the file.
+        line: u64,
+        /// The column's name.
+        column: &'static str,
+        /// The field as read.
+        text: String,
+    },
     /// Time does not increase strictly from one row to the next.
     #[error("{path}:{line}: time {t} does not increase (previous {previous})")]
-    TimeNotIncreasing { path: PathBuf, line: u64, t: f64, previous: f64 },
+    TimeNotIncreasing {
+        /// The file.
+        path: PathBuf,
+        /// The line in the file.
+        line: u64,
+        /// The row's time, s.
+        t: f64,
+        /// The previous row's time, s.
+        previous: f64,
+    },
     /// The index names a set or file number that makes no sense.
     #[error("{path}:{line}: bad index entry: {reason}")]
-    BadIndex { path: PathBuf, line: u64, reason: &'static str },
+    BadIndex {
+        /// The index file.
+        path: PathBuf,
+        /// The line in the file.
+        line: u64,
+        /// What is wrong with the entry.
+        reason: &'static str,
+    },
     /// A trajectory file holds fewer samples than any use of it needs.
     #[error("{path}: only {samples} samples")]
-    TooFewSamples { path: PathBuf, samples: usize },
+    TooFewSamples {
+        /// The file.
+        path: PathBuf,
+        /// Samples in the file.
+        samples: usize,
+    },
 }
 
 /// Finds the data folder: `$TOPSPIN_MPI_DATA` if set, else
@@ -212,7 +257,9 @@ pub fn load(dir: &Path) -> Result<Vec<RealTrajectory>, MpiError> {
 /// `docs/real-data.md` reports).
 #[derive(Clone, Debug, PartialEq)]
 pub struct SamplingStats {
+    /// Trajectories in the group.
     pub trajectories: usize,
+    /// Samples over all of them.
     pub samples: usize,
     /// Median interval between consecutive samples, s.
     pub median_dt: f64,

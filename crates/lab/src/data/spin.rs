@@ -53,6 +53,7 @@ impl SpinFit {
 /// A [`Predictor`] running [`topspin_core::fit`] with a given physics.
 #[derive(Copy, Clone, Debug, PartialEq)]
 pub struct FitPredictor {
+    /// Which fit it runs.
     pub kind: SpinFit,
     /// The physics the fit assumes (k_D, k_M, and the bounce model for a
     /// window that contains a bounce, which pre-net windows never do).
@@ -64,6 +65,8 @@ pub struct FitPredictor {
 }
 
 impl FitPredictor {
+    /// The fit `kind` under `p`'s flight and bounce models, the default table,
+    /// `p`'s flight variation and 2 mm of noise per axis.
     pub fn new(kind: SpinFit, p: &PhysicsParams) -> Self {
         let propagator = Propagator::new(p.flight_model(), p.bounce_model(), Table::default());
         FitPredictor { kind, propagator, noise: REAL_NOISE, variation: p.variation }

@@ -39,12 +39,14 @@ pub fn eval_config(p: &PhysicsParams, horizon: f64) -> EvalConfig {
 /// Which predictor a row of the comparison uses.
 #[derive(Copy, Clone, Debug, PartialEq, Eq)]
 pub enum Which {
+    /// A spin fit of [`FitPredictor`].
     Fit(SpinFit),
     /// The cubic baseline of `eval` (spin 0).
     Cubic,
 }
 
 impl Which {
+    /// A short label for tables.
     pub fn label(self) -> &'static str {
         match self {
             Which::Fit(k) => k.label(),
@@ -74,15 +76,20 @@ pub const PREDICTORS: [Which; 4] =
 /// One named set of physics constants.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Variant {
+    /// How the tables call it (e.g. `paper`).
     pub name: String,
+    /// The constants.
     pub params: PhysicsParams,
 }
 
 /// One predictor under one physics: a report per horizon in [`HORIZONS`].
 #[derive(Clone, Debug, PartialEq)]
 pub struct Row {
+    /// The physics variant's name ([`Variant::name`]).
     pub physics: String,
+    /// The predictor.
     pub predictor: Which,
+    /// One report per horizon, 0.3 s then 0.2 s.
     pub reports: Vec<Report>,
     /// The fitted states (spin included), one per trajectory.
     pub predictions: Vec<Option<Prediction>>,
@@ -141,7 +148,9 @@ pub fn markdown(rows: &[Row]) -> String {
 /// Typical fitted spin of one set, rps.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SpinSummary {
+    /// The set's name.
     pub set: String,
+    /// Trajectories with a prediction (the spins summarised).
     pub count: usize,
     /// Median ‖ω‖.
     pub norm: f64,

@@ -26,8 +26,11 @@ pub enum Window {
 /// Errors of one method on one set.
 #[derive(Clone, Debug, Serialize)]
 pub struct MethodRow {
+    /// Tracker noise σ per axis, mm.
     pub noise_mm: f64,
+    /// The observations the fit saw.
     pub window: Window,
+    /// The fit method (`paper` or `refined`).
     pub method: &'static str,
     /// ‖ω̂ − ω‖/‖ω‖ in percent.
     pub spin_err_pct: Summary,
@@ -48,18 +51,23 @@ pub struct MethodRow {
 /// The start-outlier experiment.
 #[derive(Clone, Debug, Serialize)]
 pub struct OutlierRow {
+    /// Tracker noise σ per axis, mm.
     pub noise_mm: f64,
+    /// False detections at the start of each ball of the dirty set.
     pub false_starts: usize,
     /// Share of balls whose `outliers` name exactly the false detections.
     pub named_exactly: f64,
     /// Share of balls with every false detection among `outliers`.
     pub all_found: f64,
+    /// Median spin error ‖ω̂ − ω‖/‖ω‖ without the false detections, percent.
     pub spin_err_clean_pct: f64,
+    /// Median spin error with them, percent.
     pub spin_err_dirty_pct: f64,
     /// Median dirty over median clean spin error.
     pub ratio: f64,
 }
 
+/// The method's name in tables and JSON (`paper`, `refined`).
 pub fn method_name(m: Method) -> &'static str {
     match m {
         Method::Paper => "paper",

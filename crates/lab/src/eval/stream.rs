@@ -20,9 +20,13 @@ use topspin_sim::{Setting, SimBall, SpinAxis, TrackerModel, schedule, simulate_b
 /// How the stream is made.
 #[derive(Copy, Clone, Debug, PartialEq, Serialize)]
 pub struct StreamSetup {
+    /// Balls to simulate.
     pub balls: usize,
+    /// Seed of the simulation.
     pub seed: u64,
+    /// Tracker noise σ per axis, mm.
     pub noise_mm: f64,
+    /// Probability that a frame's ball is lost, in [0, 1).
     pub dropout: f64,
     /// The tracker's frame rate, Hz.
     pub rate_hz: f64,
@@ -69,8 +73,12 @@ impl Default for StreamSetup {
 pub struct LeadRow {
     /// Time before the true hit, s ("net" rows use the net crossing).
     pub lead_s: f64,
+    /// The estimate scored: `ekf`, `ekf+window-fit spin`, `batch paper` or
+    /// `batch refined`.
     pub source: String,
+    /// Distance between the predicted and the true hitting point, 3D, mm.
     pub hit_err_mm: Summary,
+    /// |Predicted − true hitting time|, ms.
     pub hit_dt_ms: Summary,
     /// Balls without a plan (or fit) at that time.
     pub missing: usize,
@@ -79,7 +87,9 @@ pub struct LeadRow {
 /// The whole evaluation.
 #[derive(Clone, Debug, Serialize)]
 pub struct StreamReport {
+    /// How the stream was made.
     pub setup: StreamSetup,
+    /// Balls simulated.
     pub balls: usize,
     /// Balls whose true hitting point lies inside the hitting window (the
     /// others are rightly withheld and not scored).
@@ -90,6 +100,7 @@ pub struct StreamReport {
     pub learned: SessionLearned,
     /// Errors of the latest plan made before the true net crossing.
     pub at_net: Vec<LeadRow>,
+    /// Per lead time (0.5 s to 0.1 s before the true hit) and source.
     pub by_lead: Vec<LeadRow>,
     /// The EKF's signed hit-time error per ball type at [`TIMING_LEADS`].
     pub timing: Vec<TypeTiming>,
@@ -105,6 +116,7 @@ pub const TIMING_LEADS: [f64; 2] = [0.25, 0.15];
 pub struct TypeTiming {
     /// The launcher setting, e.g. `topspin-high`.
     pub setting: String,
+    /// The lead, s before the true hit.
     pub lead_s: f64,
     /// All plans at that lead, ms.
     pub signed_dt_ms: Summary,
@@ -354,6 +366,7 @@ pub const SESSION_LEADS: [f64; 2] = [0.25, 0.15];
 pub struct WorldSession {
     /// The world (`ours`: the calibration's own).
     pub world: &'static str,
+    /// Balls simulated.
     pub balls: usize,
     /// Balls whose true hitting point lies inside the hitting window.
     pub reachable: usize,

@@ -13,7 +13,9 @@ use super::fit::{MethodRow, accuracy};
 /// One world's rows.
 #[derive(Clone, Debug, Serialize)]
 pub struct WorldReport {
+    /// The world's short name.
     pub world: &'static str,
+    /// What is unlike the estimator's model, in a few words.
     pub about: &'static str,
     /// Balls simulated (some settings may not be aimable in a world).
     pub balls: usize,

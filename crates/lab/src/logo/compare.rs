@@ -32,11 +32,15 @@ pub const SOURCES: [&str; 5] = ["trajectory", "background", "cnn", "fused backgr
 /// What to compare.
 #[derive(Clone, Debug)]
 pub struct CompareOptions {
+    /// Seed of the simulated balls and renderings.
     pub seed: u64,
     /// Filmed balls per setting.
     pub balls: usize,
+    /// The launcher settings filmed.
     pub settings: Vec<Setting>,
+    /// The balls' colour.
     pub colour: BallColour,
+    /// Crops rendered per flight (at most).
     pub frames: usize,
     /// Tracker noise σ per axis, m.
     pub noise: f64,
@@ -45,8 +49,11 @@ pub struct CompareOptions {
 /// One ball's estimates, rad/s, table frame (`None`: the source gave none).
 #[derive(Clone, Debug, Serialize)]
 pub struct CompareBall {
+    /// The launcher setting.
     pub setting: Setting,
+    /// The ball's index in the run.
     pub ball: usize,
+    /// True spin, rad/s, table frame.
     pub spin_true: [f64; 3],
     /// Per source of [`SOURCES`].
     pub spin: [Option<[f64; 3]>; 5],
@@ -169,12 +176,17 @@ pub fn compare(
 /// for and the error summary over those, rps.
 #[derive(Clone, Debug, Serialize)]
 pub struct CompareRow {
+    /// The group's name (a setting, or `all`).
     pub group: String,
+    /// Balls in the group.
     pub balls: usize,
+    /// Balls each source gave a spin for, in [`SOURCES`] order.
     pub answered: [usize; 5],
+    /// |ω̂ − ω| per source over the balls it gave a spin for, rps.
     pub error_rps: [Summary; 5],
 }
 
+/// One row named `group` over `balls`.
 pub fn summarise(group: &str, balls: &[&CompareBall]) -> CompareRow {
     let mut answered = [0; 5];
     let mut errs: [Vec<f64>; 5] = Default::default();

@@ -22,12 +22,15 @@ use topspin_sim::{Setting, TrackerModel, simulate_ball};
 /// What to evaluate.
 #[derive(Clone, Debug)]
 pub struct EvalOptions {
+    /// Seed of the simulated balls and renderings.
     pub seed: u64,
     /// Filmed balls wanted per setting and colour.
     pub balls: usize,
     /// Frames per ball.
     pub frames: usize,
+    /// The launcher settings evaluated.
     pub settings: Vec<Setting>,
+    /// The ball colours; every setting is filmed in each.
     pub colours: Vec<BallColour>,
     /// Balls tried per setting and colour before giving up on finding
     /// `balls` that fly through the filmed strip.
@@ -39,9 +42,13 @@ pub struct EvalOptions {
 /// One evaluated ball.
 #[derive(Clone, Debug, Serialize)]
 pub struct BallEval {
+    /// The launcher setting.
     pub setting: Setting,
+    /// The ball's colour (`orange` or `white`).
     pub colour: &'static str,
+    /// The ball's index in the run.
     pub ball: usize,
+    /// Crops rendered of the flight.
     pub frames: usize,
     /// Frames whose logo's centre is on the visible hemisphere.
     pub truth_visible: usize,
@@ -170,8 +177,11 @@ pub fn spin_errors(fit: &[f64; 3], truth: &[f64; 3]) -> (f64, f64) {
 /// One row of the summary table.
 #[derive(Clone, Debug, Serialize)]
 pub struct Row {
+    /// The group's name (a setting, `all <colour>` or `all`).
     pub group: String,
+    /// Balls in the group.
     pub balls: usize,
+    /// Crops over those balls.
     pub frames: usize,
     /// Detection accuracy (found ⇔ truly visible), fraction of frames.
     pub detection_accuracy: f64,
@@ -179,15 +189,22 @@ pub struct Row {
     pub angle_mean: [f64; 3],
     /// On cut logos only.
     pub angle_mean_cut: [f64; 3],
+    /// Frames with a found logo touching the rim (those `angle_mean_cut`
+    /// averages).
     pub cut_frames: usize,
-    /// Spin: per method, balls fitted, median axis error (deg), median
-    /// |magnitude error| (rps).
+    /// Spin: balls with a fitted spin, per method (centroid, segment,
+    /// weighted).
     pub fitted: [usize; 3],
+    /// Median axis error of the fitted spins, per method, deg.
     pub axis_median: [f64; 3],
+    /// Median |magnitude error| of the fitted spins, per method, rps.
     pub magnitude_median: [f64; 3],
-    /// The fit on true positions: fitted, median axis, median |magnitude|.
+    /// The fit on the true logo positions of the frames the detector saw:
+    /// balls fitted.
     pub truth_fitted: usize,
+    /// Median axis error of the fits on true positions, deg.
     pub truth_axis_median: f64,
+    /// Median |magnitude error| of the fits on true positions, rps.
     pub truth_magnitude_median: f64,
 }
 

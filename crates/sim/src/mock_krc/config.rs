@@ -34,22 +34,50 @@ pub fn rsi_files(c: Correction) -> [(&'static str, &'static str); 2] {
 /// Why a controller-side file cannot be used.
 #[derive(Debug, thiserror::Error)]
 pub enum RsiFileError {
+    /// The file is not well-formed XML.
     #[error("{file}: {source}")]
-    Xml { file: &'static str, source: XmlError },
+    Xml {
+        /// Which file (`ethernet config` or `RSI context`).
+        file: &'static str,
+        /// The XML error.
+        source: XmlError,
+    },
+    /// A required element, parameter or object is absent.
     #[error("{file}: missing {what}")]
-    Missing { file: &'static str, what: &'static str },
+    Missing {
+        /// Which file.
+        file: &'static str,
+        /// What is missing.
+        what: &'static str,
+    },
+    /// A value does not parse or is out of range.
     #[error("{file}: bad value for {what}")]
-    Bad { file: &'static str, what: &'static str },
+    Bad {
+        /// Which file.
+        file: &'static str,
+        /// Which value.
+        what: &'static str,
+    },
+    /// The Ethernet configuration feeds a correction the RSI context has no object for.
     #[error("the Ethernet configuration receives {received} but the RSI context has no {object} object")]
-    Mismatch { received: &'static str, object: &'static str },
+    Mismatch {
+        /// The correction received (`RKorr` or `AKorr`).
+        received: &'static str,
+        /// The object the context lacks (`POSCORR` or `AXISCORR`).
+        object: &'static str,
+    },
 }
 
 /// The ETHERNET object's configuration.
 #[derive(Clone, Debug, PartialEq)]
 pub struct EthernetConfig {
+    /// The sensor's IP address (`IP_NUMBER`).
     pub ip: IpAddr,
+    /// The sensor's UDP port (`PORT`).
     pub port: u16,
+    /// The sensor type every answer must carry as `Type` (`SENTYPE`).
     pub sentype: String,
+    /// `ONLYSEND` is TRUE: the controller sends without expecting answers.
     pub only_send: bool,
     /// The SEND list, in order (unknown tags skipped).
     pub send: Vec<RobElement>,
@@ -68,6 +96,7 @@ impl EthernetConfig {
         if self.receive.iter().any(|t| t.starts_with("AKorr.")) { Correction::Axis } else { Correction::Cartesian }
     }
 
+    /// Parses an Ethernet configuration (`rsi/*ethernet.xml`).
     pub fn parse(text: &str) -> Result<Self, RsiFileError> {
         const F: &str = "ethernet config";
         let xml = |source| RsiFileError::Xml { file: F, source };
@@ -126,6 +155,7 @@ impl EthernetConfig {
 /// The parts of the RSI context the mock models.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ContextConfig {
+    /// The ETHERNET object's `ConfigFile` (the Ethernet configuration's file name).
     pub config_file: String,
     /// Late answers before RSI stops (ETHERNET `Timeout`).
     pub timeout: u32,
@@ -133,23 +163,28 @@ pub struct ContextConfig {
     pub precision: u8,
     /// POSCORR: correction limits, mm.
     pub lower_mm: [f64; 3],
+    /// POSCORR: upper correction limits x, y, z, mm.
     pub upper_mm: [f64; 3],
     /// POSCORR: one total rotation limit, deg.
     pub max_rot_deg: f64,
     /// POSCORRMON: total translation / rotation that stop the robot.
     pub mon_max_trans_mm: f64,
+    /// POSCORRMON: total rotation that stops the robot, deg.
     pub mon_max_rot_deg: f64,
     /// A POSCORR / an AXISCORR object is in the context.
     pub poscorr: bool,
+    /// An AXISCORR object is in the context.
     pub axiscorr: bool,
     /// AXISCORR: correction limits per axis A1..A6, degrees.
     pub axis_lower_deg: [f64; 6],
+    /// AXISCORR: upper correction limits per axis A1..A6, degrees.
     pub axis_upper_deg: [f64; 6],
     /// AXISCORRMON: |total correction| per axis that stops RSI, degrees.
     pub axis_mon_max_deg: [f64; 6],
 }
 
 impl ContextConfig {
+    /// Parses an RSI context (`rsi/*.rsi.xml`); it must hold an ETHERNET object.
     pub fn parse(text: &str) -> Result<Self, RsiFileError> {
         const F: &str = "RSI context";
         let xml = |source| RsiFileError::Xml { file: F, source };

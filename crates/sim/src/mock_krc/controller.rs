@@ -151,13 +151,18 @@ pub enum Verdict {
 /// The controller's fixed setup.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ControllerConfig {
+    /// The RSI cycle, ms (4 or 12).
     pub cycle_ms: u32,
+    /// How RKorr is applied (#ABSOLUTE or #RELATIVE).
     pub mode: CorrMode,
     /// Which correction the RSI context takes: RKorr (POSCORR) or AKorr
     /// (AXISCORR).
     pub correction: Correction,
+    /// The sensor type an answer must carry as `Type` (SENTYPE).
     pub sentype: String,
+    /// Decimals of the numbers in `<Rob>` (ETHERNET `Precision`).
     pub precision: u8,
+    /// The elements `<Rob>` carries, in the SEND list's order.
     pub send: Vec<RobElement>,
     /// Late answers before RSI stops.
     pub late_limit: u64,
@@ -178,14 +183,20 @@ pub struct ControllerConfig {
     pub stop_on_axis_rates: bool,
     /// POSCORR and POSCORRMON.
     pub lower_mm: [f64; 3],
+    /// POSCORR: upper translation limits x, y, z, mm.
     pub upper_mm: [f64; 3],
+    /// POSCORR: one total rotation limit, deg.
     pub max_rot_deg: f64,
+    /// POSCORRMON: total translation that stops RSI, mm.
     pub mon_max_trans_mm: f64,
+    /// POSCORRMON: total rotation that stops RSI, deg.
     pub mon_max_rot_deg: f64,
     /// AXISCORR (per-axis correction limits, degrees) and AXISCORRMON
     /// (|total| per axis that stops RSI, degrees).
     pub axis_lower_deg: [f64; 6],
+    /// AXISCORR: upper correction limit per axis A1..A6, degrees.
     pub axis_upper_deg: [f64; 6],
+    /// AXISCORRMON: |total correction| per axis A1..A6 that stops RSI, degrees.
     pub axis_mon_max_deg: [f64; 6],
     /// First IPOC.
     pub first_ipoc: u64,
@@ -210,6 +221,7 @@ impl ControllerConfig {
 pub struct PathSample {
     /// When the robot is at `actual`.
     pub t: Instant,
+    /// The IPOC of the cycle starting at `t`.
     pub ipoc: u64,
     /// Commanded pose after POSCORR (mm, deg, BASE); with AXISCORR the
     /// forward kinematics of the commanded joints.
@@ -242,10 +254,15 @@ pub struct MockController {
     /// Fraction of the gap the lag closes per cycle.
     lag_step: f64,
     answered: Option<[f64; 6]>,
+    /// Cycles without a valid answer by the deadline (sent as `<Delay>`).
     pub late: u64,
+    /// Answers refused for an IPOC other than the cycle's.
     pub wrong_ipoc: u64,
+    /// Answers refused for a `Type` other than SENTYPE.
     pub wrong_type: u64,
+    /// Datagrams that did not parse as `<Sen>`.
     pub malformed: u64,
+    /// Cycles whose RKorr POSCORR clamped (a non-finite component counts, set to 0).
     pub poscorr_clamped: u64,
     /// Cycles whose AKorr AXISCORR clamped.
     pub axiscorr_clamped: u64,
@@ -254,6 +271,7 @@ pub struct MockController {
     /// The smallest and largest AKorr asked per axis (before AXISCORR),
     /// degrees: the range the axis context's limits must cover.
     pub akorr_range_deg: [[f64; 2]; 6],
+    /// Cycles closed.
     pub cycles: u64,
     /// The fastest any axis turned, as a share of its limit (its peak).
     pub peak_speed_share: f64,
@@ -264,6 +282,7 @@ pub struct MockController {
     pub rates_over: u64,
     /// Cycles the brakes held the axes.
     pub braked_cycles: u64,
+    /// Why RSI stopped (`None`: it runs).
     pub stopped: Option<StopReason>,
 }
 
@@ -316,14 +335,17 @@ impl MockController {
         self.q_act
     }
 
+    /// The controller's setup (`start` as [`Self::move_start`] last set it).
     pub fn config(&self) -> &ControllerConfig {
         &self.cfg
     }
 
+    /// This cycle's IPOC.
     pub fn ipoc(&self) -> u64 {
         self.ipoc
     }
 
+    /// The actual TCP pose (`RIst`): mm, degrees, BASE.
     pub fn actual(&self) -> [f64; 6] {
         self.actual
     }

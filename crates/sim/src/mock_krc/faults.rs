@@ -33,13 +33,13 @@ pub(crate) struct UdpLink {
 }
 
 impl UdpLink {
-    pub fn new(bind: SocketAddr, peer: SocketAddr) -> io::Result<Self> {
+    pub(crate) fn new(bind: SocketAddr, peer: SocketAddr) -> io::Result<Self> {
         let socket = UdpSocket::bind(bind)?;
         socket.set_nonblocking(true)?;
         Ok(UdpLink { socket, peer })
     }
 
-    pub fn local_addr(&self) -> io::Result<SocketAddr> {
+    pub(crate) fn local_addr(&self) -> io::Result<SocketAddr> {
         self.socket.local_addr()
     }
 }
@@ -98,9 +98,13 @@ fn wait_readable(socket: &UdpSocket, timeout: Duration) {
 /// Fault probabilities (each 0..1) and the delay given to delayed answers.
 #[derive(Copy, Clone, Debug, PartialEq)]
 pub struct Faults {
+    /// Probability that an answer is lost.
     pub drop: f64,
+    /// Probability that an answer is held back by `delay_by`.
     pub delay: f64,
+    /// How long a delayed answer is held back.
     pub delay_by: Duration,
+    /// Probability that an answer is delivered twice.
     pub duplicate: f64,
     /// A request held back and sent after the next one (the sensor sees
     /// the IPOCs out of order; the held cycle goes unanswered in time).
@@ -114,6 +118,7 @@ impl Default for Faults {
 }
 
 impl Faults {
+    /// Any fault has a non-zero probability (else the link runs without the injector).
     pub fn any(&self) -> bool {
         self.drop > 0.0 || self.delay > 0.0 || self.duplicate > 0.0 || self.reorder > 0.0
     }
@@ -134,7 +139,7 @@ pub(crate) struct FaultInjector<L> {
 }
 
 impl<L: Link> FaultInjector<L> {
-    pub fn new(inner: L, faults: Faults, seed: u64) -> Self {
+    pub(crate) fn new(inner: L, faults: Faults, seed: u64) -> Self {
         FaultInjector {
             inner,
             faults,

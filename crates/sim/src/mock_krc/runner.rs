@@ -23,6 +23,7 @@ use topspin_daemon::runtime::rt::{self, RtWarning};
 /// How the mock runs.
 #[derive(Clone, Debug, PartialEq)]
 pub struct MockKrcConfig {
+    /// The controller model's setup.
     pub controller: ControllerConfig,
     /// The sensor's address (Ethernet XML IP_NUMBER:PORT unless overridden).
     pub sensor: SocketAddr,
@@ -37,7 +38,9 @@ pub struct MockKrcConfig {
     /// and catches up), and answers later than one cycle are still counted
     /// in `MockResult::answers_after_cycle`.
     pub answer_deadline: Duration,
+    /// Faults injected on the link (default: none).
     pub faults: Faults,
+    /// Seed of the fault injector's random stream.
     pub seed: u64,
     /// The mock thread's core and SCHED_FIFO priority ([`spawn`] only;
     /// default: neither). `topspin bench latency --layout dedicated` gives
@@ -121,14 +124,21 @@ impl MockKrcConfig {
 /// What a run did.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct MockResult {
+    /// Cycles run.
     pub cycles: u64,
     /// Cycles without a valid answer by the deadline (= final `<Delay>`).
     pub late: u64,
+    /// RSI stopped at the Timeout limit of late answers.
     pub stopped_by_limit: bool,
+    /// RSI stopped by POSCORRMON (the correction too large).
     pub stopped_by_monitor: bool,
+    /// Answers refused for an IPOC other than their cycle's.
     pub wrong_ipoc: u64,
+    /// Answers refused for a `Type` other than SENTYPE.
     pub wrong_type: u64,
+    /// Datagrams that did not parse as `<Sen>`.
     pub malformed: u64,
+    /// Cycles whose RKorr POSCORR clamped.
     pub poscorr_clamped: u64,
     /// Cycles whose AKorr AXISCORR clamped (axis context).
     pub axiscorr_clamped: u64,
@@ -141,11 +151,15 @@ pub struct MockResult {
     pub stopped: Option<StopReason>,
     /// The fastest and hardest any axis moved, as shares of its limits.
     pub peak_speed_share: f64,
+    /// The hardest any axis accelerated, as a share of its acceleration limit.
     pub peak_acceleration_share: f64,
     /// Cycles with an axis over its speed or acceleration limit.
     pub rates_over: u64,
+    /// Answers the fault injector dropped (`Faults::drop`).
     pub dropped: u64,
+    /// Answers it held back (`Faults::delay`).
     pub delayed: u64,
+    /// Answers it delivered twice (`Faults::duplicate`).
     pub duplicated: u64,
     /// Requests sent after the next one (`Faults::reorder`).
     pub reordered: u64,
@@ -154,6 +168,7 @@ pub struct MockResult {
     /// Accepted answers that came later than one cycle (only possible with
     /// a stretched `answer_deadline`).
     pub answers_after_cycle: u64,
+    /// The logged TCP path, one sample per cycle.
     pub path: Vec<PathSample>,
     /// What the OS refused of [`MockKrcConfig::thread`].
     pub rt_warnings: Vec<RtWarning>,
@@ -201,7 +216,9 @@ impl MockResult {
 /// A mock running on its own thread.
 #[derive(Debug)]
 pub struct MockHandle {
+    /// Set to true to stop the mock before its next cycle.
     pub stop: Arc<AtomicBool>,
+    /// The mock's own UDP address (where its requests come from).
     pub local_addr: SocketAddr,
     jog: Arc<JogPort>,
     join: JoinHandle<io::Result<MockResult>>,

@@ -94,14 +94,19 @@ impl Predictor for KalmanNoSpin {
 /// gave no bounce.
 #[derive(Clone, Debug, Serialize)]
 pub struct BallBounce {
+    /// The launcher setting.
     pub setting: Setting,
+    /// The ball's index in the run.
     pub ball: usize,
+    /// Bounce-point error (xy) per predictor of [`PREDICTORS`], mm; `None`
+    /// where it gave no bounce.
     pub errors_mm: [Option<f64>; 4],
 }
 
 /// One row of Table III.
 #[derive(Clone, Debug, Serialize)]
 pub struct BounceRow {
+    /// The launcher setting.
     pub setting: Setting,
     /// Per predictor ([`PREDICTORS`]).
     pub ours: [Summary; 4],
@@ -112,8 +117,11 @@ pub struct BounceRow {
 /// The table and the balls behind it.
 #[derive(Clone, Debug, Serialize)]
 pub struct BounceTable {
+    /// One row per launcher setting, in `Setting::ALL` order.
     pub rows: Vec<BounceRow>,
+    /// Per predictor, over the balls of every setting, mm.
     pub all: [Summary; 4],
+    /// Every ball's errors.
     pub balls: Vec<BallBounce>,
 }
 

@@ -35,19 +35,24 @@ pub(crate) fn paper_column(m: SpinMethod) -> Option<&'static [f64; 10]> {
 /// One method's classification.
 #[derive(Clone, Debug, Serialize)]
 pub struct MethodClasses {
+    /// The method.
     pub method: SpinMethod,
+    /// Its row name ([`SpinMethod::label`]).
     pub label: &'static str,
     /// False when the method is not available in this run (no model).
     pub available: bool,
     /// Cluster centre per setting, rps (None: no flight of that setting
     /// had a spin).
     pub centres_rps: Vec<Option<[f64; 3]>>,
-    /// Per setting: flights, classified right, without a spin.
+    /// Flights per setting (`Setting::ALL` order).
     pub flights: [usize; 9],
+    /// Flights classified right, per setting.
     pub right: [usize; 9],
+    /// Flights the method gave no spin for, per setting.
     pub no_spin: [usize; 9],
-    /// Accuracy per setting and in total (all flights), fraction.
+    /// Accuracy per setting, fraction (NaN for a setting without flights).
     pub accuracy: [f64; 9],
+    /// Accuracy over all flights, fraction (NaN without flights).
     pub total: f64,
     /// Median ‖ω̂ − ω‖ / ‖ω‖ over the flights with a spin, percent.
     pub spin_err_pct: f64,

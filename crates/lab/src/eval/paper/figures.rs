@@ -35,7 +35,7 @@ pub(crate) struct Series {
 }
 
 impl Series {
-    pub fn line(label: &str, colour: RGBColor, points: Vec<(f64, f64)>) -> Self {
+    pub(crate) fn line(label: &str, colour: RGBColor, points: Vec<(f64, f64)>) -> Self {
         Series { label: label.to_owned(), colour, points, markers: false }
     }
     pub(crate) fn markers(label: &str, colour: RGBColor, points: Vec<(f64, f64)>) -> Self {
@@ -254,10 +254,15 @@ pub(crate) fn logo_plane(title: &str, positions: &[Vec3], fit: &RotationFit) -> 
 /// One panel group of [`predicted`]: a flight and two predictions of it.
 #[derive(Clone, Debug)]
 pub struct PredictedCase {
+    /// Title of the panels.
     pub title: String,
+    /// The true trajectory, table frame, m.
     pub truth: Vec<Vec3>,
+    /// The observations before the net that the predictions start from, m.
     pub observed: Vec<Vec3>,
+    /// The path predicted with the refined spin fit, m.
     pub with_spin: Vec<Vec3>,
+    /// The path predicted by the Kalman filter without spin, m.
     pub without_spin: Vec<Vec3>,
 }
 

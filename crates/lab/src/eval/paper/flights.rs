@@ -56,6 +56,8 @@ pub enum SpinMethod {
 }
 
 impl SpinMethod {
+    /// Every method, in table order ([`SpinMethod::index`] is the position
+    /// here).
     pub const ALL: [SpinMethod; 7] = [
         SpinMethod::BgCentroid,
         SpinMethod::BgSegment,
@@ -66,6 +68,8 @@ impl SpinMethod {
         SpinMethod::Fused,
     ];
 
+    /// The method's position in [`SpinMethod::ALL`] and in
+    /// [`Flight::estimates`].
     pub fn index(self) -> usize {
         self as usize
     }
@@ -107,6 +111,7 @@ pub enum Estimate {
 }
 
 impl Estimate {
+    /// The spin, rad/s, table frame, where the method gave one.
     pub fn spin(&self) -> Option<Vec3> {
         match self {
             Estimate::Spin(s) => Some(Vec3::from(*s)),
@@ -134,6 +139,7 @@ pub struct CropPrediction {
 pub trait CropPredictor {
     /// A short name for the tables (e.g. the model file).
     fn name(&self) -> String;
+    /// The logo's visibility and position in one crop.
     fn predict(&mut self, crop: &CropImage<'_>, view: &BallView) -> CropPrediction;
 }
 
@@ -153,9 +159,13 @@ pub struct CnnFrames {
 /// One filmed flight.
 #[derive(Clone, Debug, Serialize)]
 pub struct Flight {
+    /// The launcher setting.
     pub setting: Setting,
+    /// The ball's index in the run.
     pub ball: usize,
+    /// The ball's colour (`orange` or `white`).
     pub colour: &'static str,
+    /// Crops rendered of the flight.
     pub frames: usize,
     /// Frames whose logo centre is on the visible hemisphere.
     pub truth_visible: usize,
@@ -167,9 +177,12 @@ pub struct Flight {
     #[serde(skip)]
     pub bg_angle_err: [Vec<f64>; 3],
     /// Seconds in the background detector over this flight's crops
-    /// (the reference included), and the same for the CNN.
+    /// (the reference included).
     pub bg_seconds: f64,
+    /// Seconds in the crop predictor (the CNN) over this flight's crops;
+    /// 0 without one.
     pub cnn_seconds: f64,
+    /// The CNN's per-frame metrics, once it ran.
     pub cnn: Option<CnnFrames>,
     /// True spin, rad/s, table frame.
     pub spin_true: [f64; 3],
@@ -178,6 +191,7 @@ pub struct Flight {
 }
 
 impl Flight {
+    /// The estimate of method `m`.
     pub fn estimate(&self, m: SpinMethod) -> &Estimate {
         &self.estimates[m.index()]
     }
@@ -186,7 +200,9 @@ impl Flight {
 /// The fits behind a flight's estimates (for fusion and figures).
 #[derive(Clone, Debug, Default)]
 pub struct FlightFits {
+    /// The paper's trajectory fit, where it succeeded.
     pub paper: Option<TrajectoryFit>,
+    /// The refined trajectory fit, where it succeeded.
     pub refined: Option<TrajectoryFit>,
     /// Per background variant, table frame.
     pub bg: [Option<RotationFit>; 3],
@@ -199,27 +215,34 @@ pub struct FlightFits {
 /// Everything a fusion sees of one flight.
 #[derive(Copy, Clone, Debug)]
 pub struct FusionInput<'a> {
+    /// The flight and its estimates.
     pub flight: &'a Flight,
+    /// The fits behind them.
     pub fits: &'a FlightFits,
 }
 
 /// A fused estimate (logo + Magnus): plugs in here.
 pub trait SpinFusion {
+    /// A short name for the tables.
     fn name(&self) -> String;
+    /// One flight's fused spin, rad/s, table frame; `None`: no spin.
     fn fuse(&mut self, input: &FusionInput<'_>) -> Option<Vec3>;
 }
 
 /// All filmed flights of a run, in setting order.
 #[derive(Debug, Default)]
 pub struct FlightSet {
+    /// The flights, in setting order.
     pub flights: Vec<Flight>,
+    /// The fits behind each flight, in the same order.
     pub fits: Vec<FlightFits>,
     /// The rendered sequences, kept only when asked (a CNN needs them).
     pub sequences: Vec<Option<Sequence>>,
     /// Balls tried per setting, and how many of them were filmed.
     pub tried: [usize; 9],
-    /// The crop predictor's and the fusion's names, once run.
+    /// The crop predictor's name, once run.
     pub cnn_name: Option<String>,
+    /// The fusion's name, once run.
     pub fusion_name: Option<String>,
 }
 

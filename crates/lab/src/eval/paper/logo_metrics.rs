@@ -28,18 +28,27 @@ pub(crate) const LOGO_METHODS: [SpinMethod; 4] =
 /// One row.
 #[derive(Clone, Debug, Serialize)]
 pub struct LogoRow {
+    /// The method.
     pub method: SpinMethod,
+    /// Its row name ([`SpinMethod::label`]).
     pub label: &'static str,
+    /// False when the method is not available in this run (no model).
     pub available: bool,
+    /// Crops evaluated.
     pub frames: usize,
     /// Fraction of frames classified right.
     pub classification: f64,
-    /// Degrees (mean, as the paper's).
+    /// Geodesic error of the logo pose, degrees (the tables print the
+    /// mean, as the paper's); networks only, empty otherwise.
     pub geodesic: Summary,
+    /// Angle between the found and the true logo centre, degrees, on frames
+    /// with a logo found and some of it visible.
     pub vector_angle: Summary,
     /// Mean processing time per crop, ms (wall clock of the calling
     /// thread, on a shared machine).
     pub ms_per_crop: f64,
+    /// The paper's numbers (classification accuracy, geodesic deg, vector angle
+    /// deg, ms per crop; NaN where it has none), for a method the paper has.
     pub paper: Option<[f64; 4]>,
 }
 

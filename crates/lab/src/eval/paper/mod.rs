@@ -37,6 +37,7 @@ use topspin_sim::Setting;
 /// How a paper run is made.
 #[derive(Copy, Clone, Debug, PartialEq, Serialize)]
 pub struct PaperConfig {
+    /// Seed of every simulated ball and rendering.
     pub seed: u64,
     /// Table III: trajectories per launcher setting (the paper: 10).
     pub bounce_balls: usize,
@@ -121,7 +122,9 @@ use topspin_sim::{SimBall, simulate_ball};
 /// and a fusion of logo and trajectory. `None`: their rows say "no model".
 #[derive(Default)]
 pub struct Extensions<'a> {
+    /// The crop predictor (the CNN).
     pub cnn: Option<&'a mut dyn CropPredictor>,
+    /// The fusion of logo and trajectory.
     pub fusion: Option<&'a mut dyn SpinFusion>,
 }
 
@@ -137,10 +140,15 @@ impl std::fmt::Debug for Extensions<'_> {
 /// The tables of one run (the figures and the latency come separately).
 #[derive(Debug)]
 pub struct Tables {
+    /// Table III.
     pub bounce: bounce::BounceTable,
+    /// The filmed flights behind Table IV and the logo metrics.
     pub set: FlightSet,
+    /// Table IV: one classification per method of [`flights::SpinMethod::ALL`].
     pub classes: Vec<classify::MethodClasses>,
+    /// The logo metrics, one row per logo method.
     pub logo: Vec<logo_metrics::LogoRow>,
+    /// The real-data table, given the recordings.
     pub real: Option<real::RealTable>,
     /// Seconds per stage on `clock`.
     pub stage_seconds: Vec<(String, f64)>,

@@ -62,13 +62,16 @@ pub enum FusedLogo {
 /// the gate, nothing where the trajectory has no fit.
 #[derive(Copy, Clone, Debug)]
 pub struct TrajectoryLogoFusion {
+    /// The logo estimate fused.
     pub logo: FusedLogo,
-    /// Flights where the logo was fused / gated out.
+    /// Flights where the logo was fused.
     pub fused: usize,
+    /// Flights where the χ² gate kept the trajectory alone.
     pub gated: usize,
 }
 
 impl TrajectoryLogoFusion {
+    /// A fusion with `logo`, its counts at zero.
     pub fn new(logo: FusedLogo) -> Self {
         TrajectoryLogoFusion { logo, fused: 0, gated: 0 }
     }

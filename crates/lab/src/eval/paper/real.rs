@@ -28,7 +28,9 @@ pub(crate) const HORIZONS: [f64; 2] = [0.3, 0.2];
 /// Errors of one predictor on one set, mm.
 #[derive(Clone, Debug, Serialize)]
 pub struct RealCell {
+    /// The predictor's label (from [`PREDICTORS`]).
     pub predictor: &'static str,
+    /// True when the predictor estimates spin.
     pub with_spin: bool,
     /// Bounce xy: count, median, mean, std.
     pub bounce: [f64; 4],
@@ -39,16 +41,22 @@ pub struct RealCell {
 /// One set's row group.
 #[derive(Clone, Debug, Serialize)]
 pub struct RealSet {
+    /// The set's name, or `all`.
     pub set: String,
+    /// Trajectories in the set.
     pub trajectories: usize,
+    /// One cell per predictor, in [`PREDICTORS`] order.
     pub cells: Vec<RealCell>,
 }
 
 /// The table.
 #[derive(Clone, Debug, Serialize)]
 pub struct RealTable {
+    /// Trajectories evaluated.
     pub trajectories: usize,
+    /// The name of the physics constants used.
     pub physics: String,
+    /// One group per set, then `all`.
     pub sets: Vec<RealSet>,
 }
 

@@ -18,47 +18,72 @@ use topspin_sim::Setting;
 /// percentiles.
 #[derive(Clone, Debug, Default, Serialize)]
 pub struct Histogram {
+    /// The path measured (e.g. `RSI answer`).
     pub name: String,
+    /// (upper bucket edge in µs, count) per recorded bucket.
     pub buckets: Vec<(u64, u64)>,
+    /// Median, µs.
     pub p50: u64,
+    /// 99th percentile, µs.
     pub p99: u64,
+    /// 99.9th percentile, µs.
     pub p999: u64,
+    /// Largest value, µs.
     pub max: u64,
+    /// Values recorded.
     pub n: u64,
 }
 
 /// A short `topspin bench latency` run.
 #[derive(Clone, Debug, Default, Serialize)]
 pub struct LatencyRun {
+    /// Length of the run asked for, s.
     pub seconds: f64,
+    /// RSI cycles the mock KR C4 ran.
     pub rsi_cycles: u64,
+    /// Cycles without a valid answer by the deadline.
     pub late_answers: u64,
+    /// One histogram per path (RSI answer, observation → plan).
     pub histograms: Vec<Histogram>,
 }
 
 /// Everything one `topspin eval paper` run produced.
 #[derive(Clone, Debug, Serialize)]
 pub struct PaperReport {
+    /// The command line that reproduces the run.
     pub command: String,
+    /// The run's settings.
     pub config: PaperConfig,
     /// Physics constants of the simulation and the fits.
     pub physics: String,
+    /// Table III.
     pub bounce: BounceTable,
+    /// Table IV, one entry per method.
     pub classes: Vec<MethodClasses>,
+    /// The logo metrics.
     pub logo: Vec<LogoRow>,
     /// Balls tried per setting to find the filmed flights.
     pub tried: [usize; 9],
+    /// The filmed flights.
     pub flights: Vec<Flight>,
+    /// The CNN's name, where one ran.
     pub cnn: Option<String>,
+    /// The fusion's name, where one ran.
     pub fusion: Option<String>,
+    /// The real-data table, where the recordings were found.
     pub real: Option<RealTable>,
     /// Why there is no real-data table, where there is none.
     pub real_note: Option<String>,
+    /// The latency bench, where one ran.
     pub latency: Option<LatencyRun>,
+    /// File names of the figures written.
     pub figures: Vec<String>,
-    /// Wall time of each stage and in all, s; the machine's load.
+    /// Wall time of each stage, s.
     pub stage_seconds: Vec<(String, f64)>,
+    /// Wall time of the whole run, s.
     pub wall_seconds: f64,
+    /// The machine: cores, worker threads, load average at the start and at the
+    /// end.
     pub machine: String,
 }
 
