@@ -8,7 +8,7 @@
 
 use topspin_core::calib::Calibration;
 use topspin_sim::demo::DemoConfig;
-use topspin_sim::world::run_virtual;
+use topspin_sim::virtual_cell::run_virtual;
 
 fn main() {
     let mut args = std::env::args().skip(1).map(|a| a.parse::<u64>().expect("BALLS and SEED are integers"));

@@ -14,7 +14,7 @@ use topspin_core::plan::StrikePlan;
 use topspin_core::time::Instant;
 use topspin_core::wire::observation::{OBSERVATION_LEN, Observation};
 use topspin_daemon::config::DaemonConfig;
-use topspin_daemon::record::{Recorder, calib_files, read_session};
+use topspin_daemon::record::{Recorder, calib_files, read_recording};
 use topspin_lab::eval::stream::{StreamSetup, simulate_stream};
 
 const TRACKER: &str = "127.0.0.7:5555";
@@ -99,7 +99,7 @@ fn a_recording_reads_back_whole() {
     let path = dir.path().join("session.mcap");
     let rec = record(&path, 4);
     assert!(rec.plans.len() > 10, "{} plans", rec.plans.len());
-    let s = read_session(&path).unwrap();
+    let s = read_recording(&path).unwrap();
     assert_eq!(s.truncated, None);
     assert_eq!(s.observations.len(), rec.datagrams);
     assert_eq!(s.plans, rec.plans);
@@ -126,7 +126,7 @@ fn replay_is_bit_exact_and_catches_a_tampered_plan() {
     assert!(t.contains("foreign ") && !t.contains("foreign 0") && !t.contains("malformed 0"), "{t}");
 
     // The same session with one plan off by one ulp in one coordinate.
-    let s = read_session(&path).unwrap();
+    let s = read_recording(&path).unwrap();
     let tampered = dir.path().join("tampered.mcap");
     let mut w = Recorder::create(&tampered, &s.config, &s.calib_files).unwrap();
     for d in &s.observations {
@@ -170,7 +170,7 @@ fn a_file_cut_off_after_a_flush_replays_what_it_holds() {
     let bytes = std::fs::read(&path).unwrap();
     let cut = dir.path().join("cut.mcap");
     std::fs::write(&cut, &bytes[..bytes.len() * 6 / 10]).unwrap();
-    let s = read_session(&cut).unwrap();
+    let s = read_recording(&cut).unwrap();
     assert!(s.truncated.is_some());
     assert!(
         s.observations.len() > rec.datagrams / 3 && s.observations.len() < rec.datagrams,

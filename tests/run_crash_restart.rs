@@ -215,7 +215,7 @@ fn sigkill_mid_stroke_keeps_the_recording_and_a_restart_resumes() {
     // The killed file opens and holds what was flushed.
     let files = recordings(&dir);
     assert_eq!(files.len(), 1, "{files:?}");
-    let killed = topspin_daemon::record::read_session(&files[0]).expect("a killed recording still opens");
+    let killed = topspin_daemon::record::read_recording(&files[0]).expect("a killed recording still opens");
     assert!(killed.truncated.is_some(), "a killed file cannot have its summary");
     assert!(!killed.observations.is_empty() && !killed.exchanges.is_empty(), "nothing flushed was kept");
     let replay = Command::new(BIN).arg("replay").arg(&files[0]).output().unwrap();
@@ -238,7 +238,7 @@ fn sigkill_mid_stroke_keeps_the_recording_and_a_restart_resumes() {
     let files = recordings(&dir);
     assert_eq!(files.len(), 2, "the restart must not overwrite the killed recording: {files:?}");
     let complete =
-        files.iter().map(|f| topspin_daemon::record::read_session(f).unwrap()).find(|s| s.truncated.is_none());
+        files.iter().map(|f| topspin_daemon::record::read_recording(f).unwrap()).find(|s| s.truncated.is_none());
     assert!(complete.is_some(), "the restarted daemon's recording is complete");
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -8,8 +8,8 @@ use std::path::PathBuf;
 use clap::Args;
 
 use super::BadInput;
-use topspin_daemon::record::{read_session, replay::replay_session};
-use topspin_daemon::viewer::replay::view_session;
+use topspin_daemon::record::{read_recording, replay::replay_recording};
+use topspin_daemon::viewer::replay::view_recording;
 use topspin_daemon::viewer::{LiveServer, ViewerSink};
 
 #[derive(Debug, Args)]
@@ -34,7 +34,7 @@ pub struct ReplayArgs {
 /// Serves the session in the live view (after the comparison).
 fn live(
     args: &ReplayArgs,
-    session: &topspin_daemon::record::Session,
+    session: &topspin_daemon::record::Recording,
     addr: std::net::SocketAddr,
 ) -> anyhow::Result<()> {
     let server = LiveServer::start(addr, None).map_err(|e| BadInput(e.to_string()))?;
@@ -48,14 +48,14 @@ fn live(
     let mut sink = ViewerSink::new(&cal, Some(server), None, None).with_offset(session.log_time_offset);
     let stop = std::sync::atomic::AtomicBool::new(false);
     let speed = (args.speed > 0.0).then_some(args.speed);
-    view_session(session, &mut sink, speed, &stop).map_err(|e| BadInput(e.to_string()))?;
+    view_recording(session, &mut sink, speed, &stop).map_err(|e| BadInput(e.to_string()))?;
     eprintln!("live view: {} messages sent", sink.sent());
     Ok(())
 }
 
 pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
-    let session = read_session(&args.file).map_err(|e| BadInput(e.to_string()))?;
-    let report = replay_session(&session).map_err(|e| BadInput(format!("{}: {e}", args.file.display())))?;
+    let session = read_recording(&args.file).map_err(|e| BadInput(e.to_string()))?;
+    let report = replay_recording(&session).map_err(|e| BadInput(format!("{}: {e}", args.file.display())))?;
     if args.json {
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {

@@ -273,7 +273,7 @@ fn write_files(dir: &Path, a: &SimOptions, p: &Plan, balls: &[SimBall], starts: 
     Ok(())
 }
 
-/// Streams in real time (see [`topspin_sim::stream`]); the capture clock is
+/// Streams in real time (see [`topspin_sim::udp_tracker`]); the capture clock is
 /// the process clock, ball k launched at `STREAM_LEAD + starts[k]` s after
 /// the start.
 fn stream(to: &str, bind: &str, tracker: &TrackerModel, balls: &[SimBall], starts: &[f64]) -> anyhow::Result<()> {
@@ -281,7 +281,7 @@ fn stream(to: &str, bind: &str, tracker: &TrackerModel, balls: &[SimBall], start
     socket.connect(to).map_err(|e| bad(format!("--to {to}: {e}")))?;
     let t0 = topspin_daemon::clock::now() + topspin_core::time::Duration::from_nanos((STREAM_LEAD * 1e9) as u64);
     let stop = std::sync::atomic::AtomicBool::new(false);
-    let stats = topspin_sim::stream::stream(&socket, balls, starts, tracker.latency, t0, &stop)
+    let stats = topspin_sim::udp_tracker::stream(&socket, balls, starts, tracker.latency, t0, &stop)
         .with_context(|| format!("sending to {to}"))?;
     let total: usize = balls.iter().map(|b| b.observations.len()).sum();
     let mut err = std::io::stderr().lock();

@@ -14,7 +14,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 use super::SimBall;
-use super::stream::{StreamStats, capture_time};
+use super::udp_tracker::{StreamStats, capture_time};
 use topspin_core::time::{Duration, Instant};
 use topspin_core::wire::observation::{OBSERVATION_LEN, Observation, ObservationPacket};
 use topspin_daemon::clock;

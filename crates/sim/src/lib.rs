@@ -8,7 +8,7 @@
 //! - [`strokes`]: the balls' source: the launcher, or real human strokes.
 //! - [`truth`]: ground truth of a flight (bounce, net, hitting plane).
 //! - [`tracker`]: sampling, noise, dropouts and false detections.
-//! - [`stream`]: the simulated tracker on the network (TTB1, paced).
+//! - [`udp_tracker`]: the simulated tracker on the network (TTB1, paced).
 //! - [`faults`]: the tracker-side fault injector around the stream.
 //! - [`strikes`]: a synthetic strike-plan stream for the RSI tests.
 //! - [`mock_krc`]: the mock KR C4 (RSI client, controller model, faults).
@@ -19,7 +19,7 @@
 //!   true ball, the rubber sends it back, the flight says where it lands.
 //! - [`probe`]: a minimal Foxglove WebSocket client that counts.
 //! - [`worlds`]: physics unlike the estimator's, for judging the fit.
-//! - [`world`]: the demo's whole cell (tracker, ingest, estimator, RSI
+//! - [`virtual_cell`]: the demo's whole cell (tracker, ingest, estimator, RSI
 //!   session, mock KR C4) on a virtual clock, judged the same way.
 //!
 //! Everything is driven by `ChaCha8Rng` seeded from one `u64`; ball k draws
@@ -40,12 +40,12 @@ pub mod pair;
 pub mod probe;
 pub mod render;
 pub mod returns;
-pub mod stream;
 pub mod strikes;
 pub mod strokes;
 pub mod tracker;
 pub mod truth;
-pub mod world;
+pub mod udp_tracker;
+pub mod virtual_cell;
 pub mod worlds;
 
 use rand::SeedableRng;

@@ -5,7 +5,7 @@
 use topspin_core::calib::Calibration;
 use topspin_core::calib::camera::CameraCalib;
 use topspin_core::logo::LogoMethod;
-use topspin_core::logo::stream::{LogoStream, Method, SEQUENCE_LEN};
+use topspin_core::logo::stream::{LogoEngine, LogoStream, SEQUENCE_LEN};
 use topspin_core::physics::Vec3;
 use topspin_core::time::{Duration, Instant};
 use topspin_sim::render::{BallColour, Scene, SequenceOptions, render_sequence};
@@ -25,7 +25,7 @@ fn a_ball_passing_the_strip_gives_one_spin_near_the_truth() {
             (seq.frames.len() == SEQUENCE_LEN).then_some((Vec3::from(b.truth.spin), seq))
         })
         .expect("a filmed ball");
-    let mut stream = LogoStream::new(cam, Method::Background(LogoMethod::Segment));
+    let mut stream = LogoStream::new(cam, LogoEngine::Background(LogoMethod::Segment));
     let mut spins = Vec::new();
     let t0 = Instant::from_nanos(1_000_000_000);
     let at = |t: f64| t0 + Duration::from_nanos((t * 1e9) as u64);

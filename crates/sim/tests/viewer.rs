@@ -6,7 +6,7 @@
 //!   schemas, stamped with wall-clock log times;
 //! - recorded: the demo's MCAP file opens with the `mcap` crate and holds
 //!   every channel (the recording's own and the viewer's), with messages on
-//!   the scene and plot channels, `record::read_session` still reads it and
+//!   the scene and plot channels, `record::read_recording` still reads it and
 //!   `topspin replay`'s comparison finds every plan identical, and its
 //!   `--live` path (the recording through the viewer) reaches a client;
 //! - the arm: on `/view/robot` of the recording, and again of its replay
@@ -33,10 +33,12 @@ use topspin_core::kinematics::{FRAMES, Joints};
 use topspin_core::physics::Vec3;
 use topspin_core::rsi::codec::RobFrame;
 use topspin_core::time::Duration;
-use topspin_daemon::record::replay::replay_session;
+use topspin_daemon::record::replay::replay_recording;
 use topspin_daemon::record::sink::RecordingSink;
-use topspin_daemon::record::{Recorder, Session, TOPIC_COUNTERS, TOPIC_DATAGRAM, TOPIC_PLAN, TOPIC_RSI, read_session};
-use topspin_daemon::viewer::replay::view_session;
+use topspin_daemon::record::{
+    Recorder, Recording, TOPIC_COUNTERS, TOPIC_DATAGRAM, TOPIC_PLAN, TOPIC_RSI, read_recording,
+};
+use topspin_daemon::viewer::replay::view_recording;
 use topspin_daemon::viewer::{LiveServer, TOPICS, Topic, ViewerSink};
 use topspin_sim::demo::{DemoConfig, run};
 use topspin_sim::probe;
@@ -160,7 +162,7 @@ fn a_demo_recording_opens_and_holds_every_channel() {
         assert!(counts.get(topic).copied().unwrap_or(0) > 0, "nothing on {topic}");
     }
 
-    let session = read_session(&path).unwrap();
+    let session = read_recording(&path).unwrap();
     assert!(session.truncated.is_none(), "{:?}", session.truncated);
     let arms = check_the_arm(&bytes, &session);
     eprintln!("recorded arms: {arms}");
@@ -170,14 +172,14 @@ fn a_demo_recording_opens_and_holds_every_channel() {
     let cal = session.calibration().unwrap();
     let rec = RecordingSink::new(Recorder::create(&again, &session.config, &session.calib_files).unwrap());
     let mut sink = ViewerSink::new(&cal, None, Some(rec), None).with_offset(session.log_time_offset);
-    view_session(&session, &mut sink, None, &AtomicBool::new(false)).unwrap();
+    view_recording(&session, &mut sink, None, &AtomicBool::new(false)).unwrap();
     drop(sink);
     let replayed = check_the_arm(&std::fs::read(&again).unwrap(), &session);
     // One every fifth cycle in both (the replay starts its count afresh).
     assert!(replayed.abs_diff(arms) <= 1, "replayed {replayed}, recorded {arms}");
     assert!(!session.plans.is_empty());
     // The demo's recording replays bit for bit, as the daemon's does.
-    let replay = replay_session(&session).unwrap();
+    let replay = replay_recording(&session).unwrap();
     assert!(replay.identical(), "{:?}", replay.first_difference);
     // `topspin replay FILE --live`: the recording through the viewer to a client.
     let server = LiveServer::start("127.0.0.1:0".parse().unwrap(), None).unwrap();
@@ -190,7 +192,7 @@ fn a_demo_recording_opens_and_holds_every_channel() {
     std::thread::sleep(std::time::Duration::from_millis(500)); // its subscriptions
     let cal = session.calibration().unwrap();
     let mut sink = ViewerSink::new(&cal, Some(server), None, None).with_offset(session.log_time_offset);
-    view_session(&session, &mut sink, None, &AtomicBool::new(false)).unwrap();
+    view_recording(&session, &mut sink, None, &AtomicBool::new(false)).unwrap();
     drop(sink);
     stop.store(true, Ordering::Relaxed);
     let seen = client.join().unwrap().unwrap();
@@ -207,7 +209,7 @@ fn a_demo_recording_opens_and_holds_every_channel() {
 
 /// Checks `/view/robot` in the MCAP `bytes` against the RSI requests of
 /// `session` (see the module doc); returns the `arm_actual` entities seen.
-fn check_the_arm(bytes: &[u8], session: &Session) -> usize {
+fn check_the_arm(bytes: &[u8], session: &Recording) -> usize {
     let cal = session.calibration().unwrap();
     let arm = cal.robot.arm();
     let base = Vec3::from(cal.robot.cell.base_in_table_xyz_m);

@@ -1,4 +1,4 @@
-//! The demo's whole cell on a virtual clock (`topspin_sim::world`): the
+//! The demo's whole cell on a virtual clock (`topspin_sim::virtual_cell`): the
 //! simulated tracker → ingest → estimator → RSI session ↔ mock KR C4, the
 //! strokes judged on the truth. What `tests/demo.rs` and
 //! `tests/tracker_faults.rs` check through the real threads and sockets,
@@ -13,7 +13,7 @@ use topspin_sim::Strokes;
 use topspin_sim::demo::{DemoConfig, OutOfReach};
 use topspin_sim::faults::TrackerFaults;
 use topspin_sim::mock_krc::MockKrcConfig;
-use topspin_sim::world::{VirtualRun, run_virtual};
+use topspin_sim::virtual_cell::{VirtualRun, run_virtual};
 
 fn summary(r: &VirtualRun) -> String {
     let mut err: Vec<f64> = r.per_ball.iter().filter(|b| b.reachable).filter_map(|b| b.hit_err_mm).collect();

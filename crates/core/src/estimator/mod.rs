@@ -36,7 +36,7 @@ use crate::physics::{FlightScales, Propagator, RacketModel, Vec3};
 use crate::plan::StrikePlan;
 use crate::time::Instant;
 use ekf::{Ekf, EkfNoise, Update};
-use session::{LearnConfig, Session};
+use session::{LearnConfig, LearnedSession};
 pub use stroke::Withheld;
 
 /// Observations collected before a candidate becomes a track.
@@ -359,7 +359,7 @@ pub struct Estimator {
     next_id: u32,
     plan_seq: u32,
     last_prediction: Option<Prediction>,
-    session: Session,
+    session: LearnedSession,
     /// σ of ln(drag multiplier) of one flight about the session's
     /// (`physics.flight_variation.drag`): the batch's prior.
     drag_variation: f64,
@@ -403,13 +403,13 @@ impl Estimator {
             next_id: 1,
             plan_seq: 0,
             last_prediction: None,
-            session: Session::new(&cal.physics.bounce_model(), &cfg.noise.bounce_vel),
+            session: LearnedSession::new(&cal.physics.bounce_model(), &cfg.noise.bounce_vel),
             drag_variation: cal.physics.variation.drag,
         }
     }
 
     /// What the session has learned so far.
-    pub fn session(&self) -> &Session {
+    pub fn session(&self) -> &LearnedSession {
         &self.session
     }
 
@@ -965,7 +965,7 @@ fn own_drag(track: &Track, prop: &Propagator, min_samples: usize) -> Option<f64>
 /// (one cubic over its window) where learning is on.
 fn ball_flight(
     prop: &Propagator,
-    session: &Session,
+    session: &LearnedSession,
     cfg: &EstimatorConfig,
     window: &[Sample],
 ) -> crate::physics::FlightModel {
@@ -979,7 +979,7 @@ fn ball_flight(
 /// Starts a batch over the track's window (pre-bounce) from the filter's
 /// state, against the session's air weighed with this ball's own cubic
 /// reading (the drag's prior).
-fn start_batch(track: &mut Track, prop: &Propagator, session: &Session, cfg: &EstimatorConfig, drag_std: f64) {
+fn start_batch(track: &mut Track, prop: &Propagator, session: &LearnedSession, cfg: &EstimatorConfig, drag_std: f64) {
     let flight = ball_flight(prop, session, cfg, &track.window);
     let priors = smooth::Priors {
         sigma: cfg.noise.measurement,

@@ -10,9 +10,9 @@
 //! reset with the estimator (a restart or a new configuration).
 //!
 //! It also learns the spin the table meets per unit of the spin a flight
-//! shows ([`Session::spin`], [`super::spin_prior`]), the next balls' spin
+//! shows ([`LearnedSession::spin`], [`super::spin_prior`]), the next balls' spin
 //! prior. A bounce no table explains (a net-cord ball, the table's edge, a
-//! tracker jump) teaches nothing ([`Session::unexplained`],
+//! tracker jump) teaches nothing ([`LearnedSession::unexplained`],
 //! [`bounce_explained`]).
 //!
 //! The measurements are bounded in work: the session's drag once per ball
@@ -46,7 +46,7 @@ pub struct LearnConfig {
     /// before its bounce (and at the bounce).
     pub ball_drag_every: usize,
     /// Learn the spin the table meets per unit of the spin a flight shows
-    /// ([`Session::spin`]), and bounce the next balls with it.
+    /// ([`LearnedSession::spin`]), and bounce the next balls with it.
     pub spin: bool,
 }
 
@@ -118,7 +118,7 @@ impl Learned {
 
 /// The session's learned drag multiplier and table.
 #[derive(Copy, Clone, Debug, PartialEq)]
-pub struct Session {
+pub struct LearnedSession {
     /// Multiplier of the calibrated drag (C_D 0.40–0.55 spans ×0.85–1.25
     /// about 0.447; bounded ×0.6–1.8).
     pub drag: Learned,
@@ -140,11 +140,11 @@ pub struct Session {
 /// from every table tried is not explained.
 pub const BOUNCE_GATE_CHI2: f64 = 16.27;
 
-impl Session {
+impl LearnedSession {
     /// A session that starts from the calibration's table and the
     /// filter's bounce noise (per axis, (m/s)²).
     pub fn new(bounce: &BounceModel, bounce_vel_start: &Vec3) -> Self {
-        Session {
+        LearnedSession {
             drag: Learned::new(1.0, (0.6, 1.8), 0.3),
             restitution: Learned::new(bounce.restitution, (0.7, 0.99), 0.08),
             friction: Learned::new(bounce.friction, (0.05, 0.6), 0.1),
@@ -310,7 +310,7 @@ mod tests {
 
     #[test]
     fn a_ball_flies_with_its_own_drag_weighed_against_the_sessions() {
-        let mut s = Session::new(&BounceModel::new(0.95, 0.14, 0.02), &Vec3::repeat(0.05));
+        let mut s = LearnedSession::new(&BounceModel::new(0.95, 0.14, 0.02), &Vec3::repeat(0.05));
         s.drag.value = 1.1;
         let cfg = LearnConfig { ball_drag_weight: 0.5, ..LearnConfig::default() };
         assert!((cfg.ball_drag(&s.drag, Some(1.3)) - 1.2).abs() < 1e-12);
@@ -324,7 +324,7 @@ mod tests {
     #[test]
     fn learning_is_bounded_and_a_bad_ball_moves_it_little() {
         let cfg = LearnConfig::default();
-        let mut s = Session::new(&BounceModel::new(0.95, 0.14, 0.02), &Vec3::repeat(0.05));
+        let mut s = LearnedSession::new(&BounceModel::new(0.95, 0.14, 0.02), &Vec3::repeat(0.05));
         let before = BallState::new(Vec3::zeros(), Vec3::new(5.0, 0.0, -3.0), Vec3::new(0.0, -150.0, 0.0));
         let after = BounceModel::new(0.88, 0.3, 0.02).apply(&before).vel;
         for _ in 0..40 {
@@ -351,7 +351,7 @@ mod tests {
     #[test]
     fn the_bounce_noise_is_what_the_residuals_leave_unexplained() {
         let cfg = LearnConfig::default();
-        let mut s = Session::new(&BounceModel::new(0.95, 0.14, 0.02), &Vec3::repeat(0.05));
+        let mut s = LearnedSession::new(&BounceModel::new(0.95, 0.14, 0.02), &Vec3::repeat(0.05));
         let explained = Vec3::new(0.01, 0.01, 0.01);
         // Residuals of ±0.3 m/s sideways, 0.1 along the flight, none up.
         for k in 0..200 {

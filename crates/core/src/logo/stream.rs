@@ -34,18 +34,18 @@ pub(crate) const MIN_CROPS: usize = 10;
 pub(crate) const SEQUENCE_GAP: Duration = Duration::from_millis(12);
 
 /// How logo positions are found.
-pub enum Method {
+pub enum LogoEngine {
     /// The paper's background subtraction with the given position method.
     Background(LogoMethod),
     /// The CNN.
     Cnn(Box<dyn LogoNetwork>),
 }
 
-impl std::fmt::Debug for Method {
+impl std::fmt::Debug for LogoEngine {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
-            Method::Background(m) => write!(f, "Background({})", m.name()),
-            Method::Cnn(c) => write!(f, "Cnn({})", c.engine_name()),
+            LogoEngine::Background(m) => write!(f, "Background({})", m.name()),
+            LogoEngine::Cnn(c) => write!(f, "Cnn({})", c.engine_name()),
         }
     }
 }
@@ -78,7 +78,7 @@ pub struct LogoCounters {
 #[derive(Debug)]
 pub struct LogoStream {
     cam: CameraCalib,
-    method: Method,
+    method: LogoEngine,
     det: DetectorConfig,
     fit: RotationFitConfig,
     /// Pixels of the current sequence, crop after crop.
@@ -98,7 +98,7 @@ const CROP_BYTES: usize = cnn::INPUT_SIZE * cnn::INPUT_SIZE * 3;
 impl LogoStream {
     /// An empty stream for the ceiling camera `cam`, finding logos with
     /// `method`.
-    pub fn new(cam: CameraCalib, method: Method) -> Self {
+    pub fn new(cam: CameraCalib, method: LogoEngine) -> Self {
         let det = DetectorConfig::for_logo(cam.logo_angular_radius());
         LogoStream {
             cam,
@@ -141,7 +141,7 @@ impl LogoStream {
         self.pixels.extend_from_slice(c.pixels);
         self.times.push(c.capture);
         self.circles.push(Circle { u: c.u as f64, v: c.v as f64, radius: c.radius as f64 });
-        if let Method::Cnn(_) = self.method
+        if let LogoEngine::Cnn(_) = self.method
             && (self.times.len() - self.outputs.len() == cnn::MAX_BATCH || self.times.len() == SEQUENCE_LEN)
         {
             self.run_cnn();
@@ -190,7 +190,7 @@ impl LogoStream {
     }
 
     fn run_cnn(&mut self) {
-        let Method::Cnn(net) = &mut self.method else { return };
+        let LogoEngine::Cnn(net) = &mut self.method else { return };
         let from = self.outputs.len();
         let to = self.times.len();
         let mut crops: [&[u8]; cnn::MAX_BATCH] = [&[]; cnn::MAX_BATCH];
@@ -211,7 +211,7 @@ impl LogoStream {
         if n < MIN_CROPS {
             return None;
         }
-        if let Method::Cnn(_) = self.method
+        if let LogoEngine::Cnn(_) = self.method
             && self.outputs.len() < n
         {
             self.run_cnn();
@@ -219,12 +219,12 @@ impl LogoStream {
         let t0 = self.times[0];
         let secs = |t: Instant| (t - t0).as_secs_f64();
         let fit = match &self.method {
-            Method::Cnn(_) => {
+            LogoEngine::Cnn(_) => {
                 let samples: Vec<LogoSample> =
                     (0..n).map(|i| self.outputs[i].sample(&self.cam, self.circles[i], secs(self.times[i]))).collect();
                 fit_rotation(&samples, &self.fit).ok().map(|f| f.rotated(&self.cam.table_from_camera))
             }
-            Method::Background(m) => {
+            LogoEngine::Background(m) => {
                 let inputs: Option<Vec<CropInput<'_>>> = (0..n)
                     .map(|i| {
                         let c = self.circles[i];

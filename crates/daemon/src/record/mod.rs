@@ -33,13 +33,13 @@
 //! Messages are buffered in the open chunk. [`Recorder::flush`] closes the
 //! chunk, writes it out and `fdatasync`s the file: a file cut off later (a
 //! crash, a power cut) still reads back everything before that flush
-//! ([`read_session`] stops at the first incomplete record and says so). The
+//! ([`read_recording`] stops at the first incomplete record and says so). The
 //! telemetry thread flushes about once a second; chunks also close by
 //! themselves at [`CHUNK_SIZE`].
 //!
 //! # What replay needs from the daemon
 //!
-//! Replay ([`replay::replay_session`]) feeds every recorded datagram, in
+//! Replay ([`replay::replay_recording`]) feeds every recorded datagram, in
 //! file order, through a fresh [`topspin_core::ingest::Ingest`] and every accepted
 //! one through [`topspin_core::estimator::Estimator::observe`], and compares the
 //! plans. That is bit-exact when the daemon's estimator saw exactly the
@@ -65,7 +65,7 @@ use topspin_core::plan::StrikePlan;
 use topspin_core::time::Instant;
 use topspin_core::wire::observation::Observation;
 
-pub use reader::{RecordedDatagram, RecordedExchange, Session, read_session};
+pub use reader::{RecordedDatagram, RecordedExchange, Recording, read_recording};
 pub use writer::Recorder;
 
 /// Topic of the tracker datagrams.

@@ -42,7 +42,7 @@ pub struct RecordedExchange {
 
 /// Everything a recording holds, in file order per topic.
 #[derive(Clone, Debug)]
-pub struct Session {
+pub struct Recording {
     /// The configuration text as recorded.
     pub config_toml: String,
     /// ... and parsed.
@@ -64,7 +64,7 @@ pub struct Session {
     pub log_time_offset: u64,
 }
 
-impl Session {
+impl Recording {
     /// The recorded calibration, rebuilt by [`CalibDir::load`](crate::calib_files::CalibDir::load) from the
     /// recorded texts (written to a temporary folder, removed after).
     pub fn calibration(&self) -> Result<Calibration, RecordError> {
@@ -92,7 +92,7 @@ impl Session {
 /// Reads a recording. A file cut off after a [`super::Recorder::flush`]
 /// reads back what was flushed (`truncated` says so); a file without the
 /// recorded configuration, or not MCAP at all, is an error.
-pub fn read_session(path: &Path) -> Result<Session, RecordError> {
+pub fn read_recording(path: &Path) -> Result<Recording, RecordError> {
     let shown = path.display().to_string();
     let bytes = std::fs::read(path).map_err(|source| RecordError::Io { path: shown.clone(), source })?;
     let invalid = |message: String| RecordError::Invalid { path: shown.clone(), message };
@@ -105,7 +105,7 @@ pub fn read_session(path: &Path) -> Result<Session, RecordError> {
     let mut topics: HashMap<u16, String> = HashMap::new();
     let mut config_toml = None;
     let mut calib_files = Vec::new();
-    let mut s = Session {
+    let mut s = Recording {
         config_toml: String::new(),
         config: DaemonConfig::default(),
         calib_files: Vec::new(),

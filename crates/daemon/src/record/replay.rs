@@ -6,7 +6,7 @@
 
 use serde::Serialize;
 
-use super::{RecordError, Session, plan_floats};
+use super::{RecordError, Recording, plan_floats};
 use topspin_core::estimator::Estimator;
 use topspin_core::ingest::{Ingest, IngestCounters};
 use topspin_core::plan::StrikePlan;
@@ -100,7 +100,7 @@ pub(crate) fn differing_fields(a: &StrikePlan, b: &StrikePlan) -> Vec<String> {
 }
 
 /// The plans the daemon's ingest and estimator make from the recorded datagrams.
-pub(crate) fn replay_plans(session: &Session) -> Result<(Vec<StrikePlan>, IngestCounters), RecordError> {
+pub(crate) fn replay_plans(session: &Recording) -> Result<(Vec<StrikePlan>, IngestCounters), RecordError> {
     let cal = session.calibration()?;
     let cfg = &session.config;
     let mut ingest = Ingest::new(Some(cfg.network.tracker_source), cfg.fixed_latency_ns());
@@ -117,7 +117,7 @@ pub(crate) fn replay_plans(session: &Session) -> Result<(Vec<StrikePlan>, Ingest
 }
 
 /// Replays `session` and compares its plans with the recorded ones.
-pub fn replay_session(session: &Session) -> Result<ReplayReport, RecordError> {
+pub fn replay_recording(session: &Recording) -> Result<ReplayReport, RecordError> {
     let (replayed, ingest) = replay_plans(session)?;
     let recorded = &session.plans;
     let compared = recorded.len().min(replayed.len());

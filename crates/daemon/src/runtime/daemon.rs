@@ -31,7 +31,7 @@ use topspin_core::estimator::{Estimator, EstimatorConfig, LogoSpin};
 use topspin_core::ingest::clock::ClockMap;
 use topspin_core::ingest::{Accepted, Ingest, IngestCounters};
 use topspin_core::logo::pipeline::LogoMethod;
-use topspin_core::logo::stream::{LogoCounters, LogoStream, Method};
+use topspin_core::logo::stream::{LogoCounters, LogoEngine, LogoStream};
 use topspin_core::motion::generator::Phase;
 use topspin_core::rsi::session::{RsiSession, SessionConfig, SessionEvent, SessionStats};
 use topspin_core::time::{Duration, Instant};
@@ -148,12 +148,12 @@ pub enum LogoMethodChoice {
 impl LogoMethodChoice {
     /// The logo stream's method: the CNN loaded from its model (the
     /// reason when it does not load), or background subtraction.
-    pub fn load(&self) -> Result<Method, String> {
+    pub fn load(&self) -> Result<LogoEngine, String> {
         Ok(match self {
             LogoMethodChoice::Cnn { model, backend } => {
-                Method::Cnn(Box::new(LogoCnn::load(model, backend).map_err(|e| e.to_string())?))
+                LogoEngine::Cnn(Box::new(LogoCnn::load(model, backend).map_err(|e| e.to_string())?))
             }
-            LogoMethodChoice::Background => Method::Background(LogoMethod::Segment),
+            LogoMethodChoice::Background => LogoEngine::Background(LogoMethod::Segment),
         })
     }
 }

@@ -7,7 +7,7 @@
 
 use std::sync::atomic::{AtomicBool, Ordering};
 
-use crate::record::{RecordError, Session};
+use crate::record::{RecordError, Recording};
 use crate::runtime::telemetry::{QUEUE_INTERVAL_S, QueueDepths, RECORDED_RSI, RsiRecord, Telemetry, TelemetrySink};
 use topspin_core::estimator::Estimator;
 use topspin_core::ingest::Ingest;
@@ -15,8 +15,8 @@ use topspin_core::time::Duration;
 
 /// Feeds `session` to `sink`; `speed`: recorded seconds per wall second
 /// (`None`: as fast as it goes). Returns the events handed over.
-pub fn view_session(
-    session: &Session,
+pub fn view_recording(
+    session: &Recording,
     sink: &mut dyn TelemetrySink,
     speed: Option<f64>,
     stop: &AtomicBool,

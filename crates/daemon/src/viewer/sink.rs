@@ -129,7 +129,7 @@ impl Outputs {
 
 /// What the viewer remembers of the current ball.
 #[derive(Debug, Default)]
-struct BallView {
+struct CurrentBall {
     trajectory: Option<u32>,
     /// Plans of the current trajectory: (made_at, hit_time, position, seq).
     plans: Vec<StrikePlan>,
@@ -144,7 +144,7 @@ pub struct ViewerSink {
     arm: ArmView,
     prop: Propagator,
     out: Outputs,
-    ball: BallView,
+    ball: CurrentBall,
     obs_count: u64,
     rsi_count: u64,
     rsi: RsiPlot,
@@ -188,7 +188,7 @@ impl ViewerSink {
                 sent: 0,
                 last_log: [0; TOPICS.len()],
             },
-            ball: BallView::default(),
+            ball: CurrentBall::default(),
             obs_count: 0,
             rsi_count: 0,
             rsi: RsiPlot::default(),

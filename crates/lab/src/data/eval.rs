@@ -19,7 +19,7 @@ use topspin_core::physics::{BallState, Event, FlightScales, Propagator, StopAt, 
 
 use super::frame::{BounceSearch, DetectedBounce, LabToTable, detect_bounces};
 use super::mpi::{RealTrajectory, SETS, median};
-use super::poly::{eval, eval_deriv, polyfit};
+use super::polyfit::{eval, eval_deriv, polyfit};
 
 /// What a predictor says about a ball from its observations.
 #[derive(Copy, Clone, Debug, PartialEq)]

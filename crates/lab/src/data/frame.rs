@@ -11,7 +11,7 @@
 use topspin_core::physics::Vec3;
 
 use super::mpi::RealTrajectory;
-use super::poly::{eval, eval_deriv, polyfit};
+use super::polyfit::{eval, eval_deriv, polyfit};
 
 /// Ball radius, m: the ball's centre at contact is surface + r.
 pub const BALL_RADIUS: f64 = 0.02;

@@ -19,6 +19,6 @@ pub mod calibrate;
 pub mod eval;
 pub mod frame;
 pub mod mpi;
-pub mod poly;
+pub mod polyfit;
 pub mod spin;
 pub mod study;

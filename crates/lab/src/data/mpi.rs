@@ -309,7 +309,7 @@ pub fn sampling_stats(trajs: &[&RealTrajectory], skip_near_z: f64) -> SamplingSt
             let t0 = s[i].0;
             for axis in 0..3 {
                 let pts: Vec<(f64, f64)> = win.iter().map(|(t, p)| (t - t0, p[axis])).collect();
-                if let Some(c) = super::poly::polyfit::<3>(&pts) {
+                if let Some(c) = super::polyfit::polyfit::<3>(&pts) {
                     let r = s[i].1[axis] - c[0];
                     sq[axis] += r * r;
                 }

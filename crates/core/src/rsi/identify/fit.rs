@@ -58,7 +58,7 @@ pub struct Trace {
 
 /// Why the fit could not run.
 #[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
-pub enum FitError {
+pub enum ServoFitError {
     /// No axis was excited, or `u` and `y` differ in length.
     #[error("no excited axis, or the trace is inconsistent")]
     BadTrace,
@@ -211,10 +211,10 @@ fn minimize_lag(dt: f64, mut cost: impl FnMut(f64) -> f64) -> (f64, f64) {
 }
 
 /// Fits d in 0..=`max_dead_time_cycles` and τ (see the module doc).
-pub fn fit(trace: &Trace, max_dead_time_cycles: usize) -> Result<ServoFit, FitError> {
+pub fn fit(trace: &Trace, max_dead_time_cycles: usize) -> Result<ServoFit, ServoFitError> {
     let dt = trace.cycle_s;
     if trace.u.len() != trace.y.len() || !trace.excited.iter().any(|e| *e) || dt.is_nan() || dt <= 0.0 {
-        return Err(FitError::BadTrace);
+        return Err(ServoFitError::BadTrace);
     }
     let mut axes = Vec::new();
     for (axis, _) in trace.excited.iter().enumerate().filter(|(_, e)| **e) {
@@ -223,14 +223,14 @@ pub fn fit(trace: &Trace, max_dead_time_cycles: usize) -> Result<ServoFit, FitEr
         let y: Vec<f64> = trace.y.iter().map(|v| v.map_or(0.0, |p| p[axis])).collect();
         let (lo, hi) = u.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), x| (l.min(*x), h.max(*x)));
         if hi <= lo {
-            return Err(FitError::NoExcitation { axis });
+            return Err(ServoFitError::NoExcitation { axis });
         }
         axes.push(AxisData { axis, u, y, seen });
     }
     let samples: usize = axes.iter().map(|a| a.seen.iter().filter(|s| **s).count()).sum();
     let params = 1 + 2 * axes.len();
     if samples < 10 * params + max_dead_time_cycles {
-        return Err(FitError::TooFewSamples { samples });
+        return Err(ServoFitError::TooFewSamples { samples });
     }
     let means: Vec<f64> = axes
         .iter()
@@ -415,10 +415,10 @@ mod tests {
         for u in &mut flat.u {
             u[1] = 0.0;
         }
-        assert_eq!(fit(&flat, 30), Err(FitError::NoExcitation { axis: 1 }));
+        assert_eq!(fit(&flat, 30), Err(ServoFitError::NoExcitation { axis: 1 }));
         let mut few = t.clone();
         few.y.iter_mut().skip(20).for_each(|y| *y = None);
-        assert!(matches!(fit(&few, 30), Err(FitError::TooFewSamples { .. })));
-        assert_eq!(fit(&Trace { excited: [false; 3], ..t }, 30), Err(FitError::BadTrace));
+        assert!(matches!(fit(&few, 30), Err(ServoFitError::TooFewSamples { .. })));
+        assert_eq!(fit(&Trace { excited: [false; 3], ..t }, 30), Err(ServoFitError::BadTrace));
     }
 }

@@ -32,7 +32,7 @@ pub mod excitation;
 pub mod fit;
 
 pub use excitation::{AxisChoice, Excitation, ExcitationConfig, ExcitationError};
-pub use fit::{FitError, ServoFit, Trace};
+pub use fit::{ServoFit, ServoFitError, Trace};
 
 use super::codec::{KukaPose, RobFrame, SenFrame, check_text};
 use super::session::{ConfigError, SessionError};
@@ -233,7 +233,7 @@ pub enum IdentifyError {
     },
     /// The fit could not run.
     #[error("fit: {0}")]
-    Fit(#[from] FitError),
+    Fit(#[from] ServoFitError),
     /// RIst follows the correction with a gain far from one.
     #[error(
         "RIst follows the correction with gain {gain:.2} on {axis}: check that RIst and POSCORR use the same BASE (RefCorrSys) and TOOL"

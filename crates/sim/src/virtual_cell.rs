@@ -20,7 +20,7 @@ use crate::faults::{InjectedCounts, Sender, inject, plan_datagrams};
 use crate::mock_krc::{Faults, MockKrcConfig, MockResult};
 use crate::pair::Pair;
 use crate::render::Sequence;
-use crate::stream::capture_time;
+use crate::udp_tracker::capture_time;
 use crate::{SimBall, schedule, simulate_in};
 use topspin_core::calib::Calibration;
 use topspin_core::estimator::{Estimator, EstimatorEvent};
