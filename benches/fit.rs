@@ -6,9 +6,9 @@ use std::hint::black_box;
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use topspin_core::calib::Calibration;
-use topspin_core::fit::poly::Cubic;
-use topspin_core::fit::refine::{RefineConfig, refine};
-use topspin_core::fit::{Sample, magnus, predict};
+use topspin_core::fit::Cubic;
+use topspin_core::fit::{RefineConfig, refine};
+use topspin_core::fit::{Sample, predict, solve_magnus};
 use topspin_core::physics::{BallState, FlightScales, Vec3};
 
 /// 60 observations at 150 Hz of a topspin ball from the opponent's end,
@@ -34,11 +34,11 @@ fn benches(c: &mut Criterion) {
     c.bench_function("fit/paper_magnus_60", |b| {
         b.iter(|| {
             let cubic = Cubic::fit(black_box(&samples).iter()).unwrap();
-            magnus::solve(&cubic, samples.iter().map(|s| s.t), &prop.flight).unwrap()
+            solve_magnus(&cubic, samples.iter().map(|s| s.t), &prop.flight).unwrap()
         })
     });
     let cubic = Cubic::fit(samples.iter()).unwrap();
-    let lin = magnus::solve(&cubic, samples.iter().map(|s| s.t), &prop.flight).unwrap();
+    let lin = solve_magnus(&cubic, samples.iter().map(|s| s.t), &prop.flight).unwrap();
     let init = BallState::new(cubic.pos(0.0), cubic.vel(0.0), lin.spin_linear);
     c.bench_function("fit/refine_60", |b| {
         b.iter(|| refine(black_box(&samples), &init, FlightScales::ONE, &prop, &RefineConfig::default()))

@@ -6,8 +6,8 @@ use std::hint::black_box;
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use topspin_core::calib::Calibration;
-use topspin_core::calib::camera::CameraCalib;
-use topspin_core::logo::pipeline::views;
+use topspin_core::calib::CameraCalib;
+use topspin_core::logo::views;
 use topspin_core::logo::{
     BallReference, CropImage, CropInput, DetectorConfig, LogoSample, RotationFitConfig, detect, fit_rotation,
 };

@@ -9,7 +9,7 @@ use std::process::{Command, Stdio};
 use std::time::Duration;
 
 use topspin_core::time::Instant;
-use topspin_core::wire::observation::{OBSERVATION_LEN, Observation};
+use topspin_core::wire::{OBSERVATION_LEN, Observation};
 
 fn topspin() -> Command {
     Command::new(env!("CARGO_BIN_EXE_topspin"))

@@ -5,7 +5,7 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-use topspin_core::wire::crop::{CROP_MAX_LEN, Crop};
+use topspin_core::wire::{CROP_MAX_LEN, Crop};
 
 const BIN: &str = env!("CARGO_BIN_EXE_topspin");
 

@@ -12,7 +12,7 @@ use topspin_core::estimator::Estimator;
 use topspin_core::ingest::Ingest;
 use topspin_core::plan::StrikePlan;
 use topspin_core::time::Instant;
-use topspin_core::wire::observation::{OBSERVATION_LEN, Observation};
+use topspin_core::wire::{OBSERVATION_LEN, Observation};
 use topspin_daemon::config::DaemonConfig;
 use topspin_daemon::record::{Recorder, calib_files, read_recording};
 use topspin_lab::eval::stream::{StreamSetup, simulate_stream};

@@ -8,7 +8,7 @@ use std::path::PathBuf;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use topspin_core::wire::observation::Observation;
+use topspin_core::wire::Observation;
 
 const BIN: &str = env!("CARGO_BIN_EXE_topspin");
 

@@ -3,7 +3,7 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use topspin_core::wire::crop::{Crop, CropPacket};
+use topspin_core::wire::{Crop, CropPacket};
 
 fuzz_target!(|data: &[u8]| {
     if let Ok(p) = CropPacket::new_checked(data) {

@@ -3,7 +3,7 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use topspin_core::wire::observation::{OBSERVATION_LEN, Observation, ObservationPacket};
+use topspin_core::wire::{OBSERVATION_LEN, Observation, ObservationPacket};
 
 fuzz_target!(|data: &[u8]| {
     if let Ok(p) = ObservationPacket::new_checked(data) {

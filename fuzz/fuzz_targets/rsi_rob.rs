@@ -4,7 +4,7 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use topspin_core::rsi::codec::{RobElement, RobFrame};
+use topspin_core::rsi::{RobElement, RobFrame};
 
 const ALL: [RobElement; 5] =
     [RobElement::RIst, RobElement::RSol, RobElement::AIPos, RobElement::ASPos, RobElement::Delay];

@@ -4,7 +4,7 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use topspin_core::rsi::codec::{SenFrame, check_text};
+use topspin_core::rsi::{SenFrame, check_text};
 
 fuzz_target!(|data: &[u8]| {
     let Ok(v) = SenFrame::parse(data) else { return };

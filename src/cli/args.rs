@@ -6,7 +6,7 @@ use std::str::FromStr;
 
 use clap::ValueEnum;
 use topspin_core::logo::GapRule;
-use topspin_core::logo::pipeline::LogoMethod;
+use topspin_core::logo::LogoMethod;
 use topspin_sim::Setting;
 use topspin_sim::render::BallColour;
 

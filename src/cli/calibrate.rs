@@ -380,8 +380,8 @@ fn touch_over_rsi(a: &CellArgs, calib: &Calibration) -> anyhow::Result<Vec<Touch
             if let Some((p, Some(q))) = requests.first() {
                 let r = &calib.robot;
                 let arm = r.arm();
-                if let Ok((pose, joints)) = topspin_core::rsi::start::read_start(&arm, Some(*p), Some(*q), None)
-                    && let Some(m) = topspin_core::rsi::start::check_frames(
+                if let Ok((pose, joints)) = topspin_core::rsi::read_start(&arm, Some(*p), Some(*q), None)
+                    && let Some(m) = topspin_core::rsi::check_frames(
                         &arm,
                         &pose,
                         &joints,

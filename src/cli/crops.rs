@@ -5,8 +5,8 @@
 use std::path::Path;
 
 use super::BadInput;
-use topspin_core::logo::ball::Circle;
-use topspin_core::wire::crop::crop_origin;
+use topspin_core::logo::Circle;
+use topspin_core::wire::crop_origin;
 
 /// One decoded crop of a folder.
 #[derive(Debug)]

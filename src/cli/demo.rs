@@ -22,7 +22,7 @@ pub struct DemoArgs {
     /// takes: `cartesian` (RKorr, POSCORR) or `axis` (AKorr from topspin's
     /// inverse kinematics, AXISCORR).
     #[arg(long, default_value = "cartesian", value_parser = super::mock_krc::parse_correction)]
-    pub correction: topspin_core::rsi::session::Correction,
+    pub correction: topspin_core::rsi::Correction,
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
     /// Tracker noise per axis, mm.
@@ -125,7 +125,7 @@ pub fn run(a: DemoArgs) -> anyhow::Result<()> {
                     topspin_daemon::runtime::daemon::LogoMethodChoice::Background
                 }
             },
-            camera: topspin_core::calib::camera::CameraCalib::default_camera(),
+            camera: topspin_core::calib::CameraCalib::default_camera(),
             camera_latency: topspin_core::time::Duration(0),
             thread: Default::default(),
         });

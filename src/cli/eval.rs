@@ -369,7 +369,7 @@ fn run_stream(a: EvalStreamArgs) -> anyhow::Result<()> {
         l.spin_scale[1],
         l.spin_scale[2],
         l.spin_scale[3],
-        topspin_core::estimator::spin_prior::SPIN_BIN_CENTRES,
+        topspin_core::estimator::SPIN_BIN_CENTRES,
         l.spin_share[0],
         l.spin_share[1],
         l.spin_share[2],

@@ -15,7 +15,7 @@ use clap::Args;
 use super::BadInput;
 use super::fit::{PhysicsChoice, load_calibration};
 use topspin_core::calib::Calibration;
-use topspin_core::calib::camera::CameraCalib;
+use topspin_core::calib::CameraCalib;
 use topspin_lab::data::eval::prepare;
 use topspin_lab::data::frame::MPI_LAB_TO_TABLE;
 use topspin_lab::data::mpi::{load, locate};

@@ -10,7 +10,7 @@ use clap::Args;
 
 use super::BadInput;
 use topspin_core::calib::Calibration;
-use topspin_core::rsi::session::Correction;
+use topspin_core::rsi::Correction;
 use topspin_core::time::Duration;
 use topspin_sim::mock_krc::config::{ContextConfig, EthernetConfig, rsi_files};
 use topspin_sim::mock_krc::{CorrMode, Faults, MockKrcConfig};
@@ -116,7 +116,7 @@ fn parse_brakes(s: &str) -> Result<topspin_sim::mock_krc::Brakes, String> {
 
 /// A KUKA frame (mm, degrees) as a pose.
 fn frame(v: [f64; 6]) -> topspin_core::kinematics::Pose {
-    topspin_core::rsi::codec::KukaPose::from_array(v).to_pose()
+    topspin_core::rsi::KukaPose::from_array(v).to_pose()
 }
 
 pub(crate) fn parse_correction(s: &str) -> Result<Correction, String> {

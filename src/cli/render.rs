@@ -15,7 +15,7 @@
 //! the logo's centre on the unit sphere and the orientation (body → camera
 //! quaternion; the logo is the body's +z) in the camera frame; the ball
 //! centre and the spin in the table frame; `view_*` the logo's centre in
-//! the view frame of the measured circle ([`topspin_core::logo::view`]: z towards
+//! the view frame of the measured circle ([`topspin_core::logo::BallView`]: z towards
 //! the camera, x along image u, y image up), the CNN's training target.
 
 use std::fmt::Write as _;
@@ -30,11 +30,11 @@ use serde_json::json;
 use super::args::{Colours, Settings};
 use super::bad;
 use topspin_core::calib::Calibration;
-use topspin_core::calib::camera::CameraCalib;
+use topspin_core::calib::CameraCalib;
 use topspin_core::logo::BallView;
 use topspin_core::physics::{Vec3, rad_to_rps};
 use topspin_core::time::Instant;
-use topspin_core::wire::crop::{CROP_MAX_LEN, Crop};
+use topspin_core::wire::{CROP_MAX_LEN, Crop};
 use topspin_sim::render::MIN_FILMED_FRAMES;
 use topspin_sim::render::{Conditions, Frame, Scene, Sequence, SequenceOptions, render_sequence};
 use topspin_sim::{TrackerModel, simulate_ball};

@@ -15,7 +15,7 @@ use clap::Args;
 
 use super::BadInput;
 use topspin_core::calib::Calibration;
-use topspin_core::calib::camera::CameraCalib;
+use topspin_core::calib::CameraCalib;
 use topspin_core::time::Duration;
 use topspin_daemon::config::{DaemonConfig, LogoMethodConfig, RsiWait};
 use topspin_daemon::record::sink::RecordingSink;

@@ -1,6 +1,6 @@
 //! The logo CNN's engine (paper §III) through `ort`: loads the ONNX model
 //! of `tools/logo_cnn/train.py` and runs it on 60 × 60 crops, answering
-//! with [`CnnOutput`]s (the contract lives in `topspin_core::logo::cnn`).
+//! with [`CnnOutput`]s (the contract is `topspin_core::logo::LogoNetwork`).
 //!
 //! Two backends, chosen once per process (ONNX Runtime's API pointer is
 //! process-global): the embedded pure-Rust **tract** (`ort-tract`), which
@@ -27,10 +27,10 @@ use ort::session::Session;
 use ort::session::builder::GraphOptimizationLevel;
 use ort::value::TensorRef;
 
-use topspin_core::calib::camera::CameraCalib;
-use topspin_core::logo::ball::Circle;
-pub use topspin_core::logo::cnn::{CnnOutput, INPUT_LEN, INPUT_SIZE, LogoNetwork, MAX_BATCH, VISIBLE_THRESHOLD};
-use topspin_core::logo::rotation::{LogoSample, RotationFit, RotationFitConfig, RotationFitError, fit_rotation};
+use topspin_core::calib::CameraCalib;
+use topspin_core::logo::Circle;
+pub use topspin_core::logo::{CnnOutput, INPUT_LEN, INPUT_SIZE, LogoNetwork, MAX_BATCH, VISIBLE_THRESHOLD};
+use topspin_core::logo::{LogoSample, RotationFit, RotationFitConfig, RotationFitError, fit_rotation};
 
 /// Environment variable naming the ONNX Runtime shared library.
 const ORT_DYLIB_ENV: &str = "ORT_DYLIB_PATH";

@@ -25,6 +25,18 @@
 //! - [`logo`]: spin from the ball's printed logo in ceiling-camera crops.
 //! - [`stats`]: median / quantile summaries.
 //!
+//! Where to start: [`calib::Calibration`] (the cell, from text), then the
+//! three sans-IO types the daemon's threads own, each with a runnable
+//! example: [`ingest::Ingest`] (tracker datagrams in),
+//! [`estimator::Estimator`] (observations → strike plans) and
+//! [`rsi::RsiSession`] (`<Rob>` in, `<Sen>` out, every 4 ms). Offline:
+//! [`fit::fit_trajectory`] and [`logo::LogoStream`].
+//!
+//! Each area exports its items flat (`topspin_core::rsi::RsiSession`); the
+//! files inside an area are private. Two sub-areas keep a module of their
+//! own: [`rsi::identify`] (the servo model's identification) and
+//! [`calib::cell`] (the table's place from touch points).
+//!
 //! `DESIGN §n` in these docs cites section n of `docs/design.md`.
 
 #![warn(missing_docs)]

@@ -10,11 +10,11 @@ use topspin_core::calib::Calibration;
 use topspin_core::geometry::EulerZyx;
 use topspin_core::geometry::Pose6;
 use topspin_core::motion::MotionLimits;
-use topspin_core::motion::safety::SafetyFilter;
+use topspin_core::motion::SafetyFilter;
 use topspin_core::physics::Vec3;
 use topspin_core::plan::StrikePlan;
-use topspin_core::rsi::codec::{KukaPose, RobElement, RobFrame, SenFrame};
-use topspin_core::rsi::session::{MAX_ANSWER_LEN, RsiSession, SessionConfig};
+use topspin_core::rsi::{KukaPose, RobElement, RobFrame, SenFrame};
+use topspin_core::rsi::{MAX_ANSWER_LEN, RsiSession, SessionConfig};
 use topspin_core::time::Instant;
 
 fn hostile() -> impl Strategy<Value = f64> {

@@ -8,8 +8,8 @@ use topspin_core::geometry::EulerZyx;
 use topspin_core::motion::MotionLimits;
 use topspin_core::physics::Vec3;
 use topspin_core::plan::StrikePlan;
-use topspin_core::rsi::codec::{KukaPose, RobElement, RobFrame};
-use topspin_core::rsi::session::{Correction, MAX_ANSWER_LEN, RsiSession, SessionConfig};
+use topspin_core::rsi::{Correction, MAX_ANSWER_LEN, RsiSession, SessionConfig};
+use topspin_core::rsi::{KukaPose, RobElement, RobFrame};
 use topspin_core::time::Instant;
 
 #[path = "alloc_counter/mod.rs"]

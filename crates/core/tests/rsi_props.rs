@@ -9,8 +9,8 @@ use topspin_core::geometry::EulerZyx;
 use topspin_core::motion::MotionLimits;
 use topspin_core::physics::Vec3;
 use topspin_core::plan::StrikePlan;
-use topspin_core::rsi::codec::{KukaPose, RobElement, RobFrame, SenFrame};
-use topspin_core::rsi::session::{MAX_ANSWER_LEN, RsiSession, SessionConfig};
+use topspin_core::rsi::{KukaPose, RobElement, RobFrame, SenFrame};
+use topspin_core::rsi::{MAX_ANSWER_LEN, RsiSession, SessionConfig};
 use topspin_core::time::Instant;
 
 fn pose() -> impl Strategy<Value = [f64; 6]> {

@@ -5,8 +5,8 @@
 
 use std::path::{Path, PathBuf};
 
-use topspin_core::calib::camera::{CameraCalib, DEFAULT_CAMERA};
 use topspin_core::calib::{CalibError, Calibration, DEFAULT_PHYSICS, DEFAULT_ROBOT, DEFAULT_STRIKE, DEFAULT_TABLE};
+use topspin_core::calib::{CameraCalib, DEFAULT_CAMERA};
 
 /// A calibration that loads from a `calib/` folder.
 pub trait CalibDir: Sized {

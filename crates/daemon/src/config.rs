@@ -17,7 +17,7 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
 use topspin_core::estimator::EstimatorConfig;
-use topspin_core::estimator::session::LearnConfig;
+use topspin_core::estimator::LearnConfig;
 
 /// Where the system-wide configuration lives.
 pub(crate) const SYSTEM_CONFIG_PATH: &str = "/etc/topspin/topspin.toml";
@@ -249,7 +249,7 @@ pub struct RsiConfig {
 
 impl RsiConfig {
     /// The correction (`correction`, validated by [`DaemonConfig::validate`]).
-    pub fn correction(&self) -> topspin_core::rsi::session::Correction {
+    pub fn correction(&self) -> topspin_core::rsi::Correction {
         self.correction.parse().unwrap_or_default()
     }
 }
@@ -538,7 +538,7 @@ impl DaemonConfig {
         if s.is_empty() || s.len() > 64 || !s.bytes().all(|b| b.is_ascii_alphanumeric() || b == b'_' || b == b'-') {
             return Err(invalid("rsi.sentype", format!("{s:?} is not a SENTYPE (1 to 64 of A-Z a-z 0-9 _ -)")));
         }
-        if self.rsi.correction.parse::<topspin_core::rsi::session::Correction>().is_err() {
+        if self.rsi.correction.parse::<topspin_core::rsi::Correction>().is_err() {
             return Err(invalid(
                 "rsi.correction",
                 format!("{:?} is not \"cartesian\" or \"axis\"", self.rsi.correction),

@@ -96,7 +96,7 @@ impl FloorServer {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use topspin_core::rsi::codec::SenFrame;
+    use topspin_core::rsi::SenFrame;
 
     #[test]
     fn the_ipoc_is_copied_into_an_answer_the_controller_takes() {

@@ -10,8 +10,8 @@ use std::net::{IpAddr, SocketAddr, UdpSocket};
 
 use crate::clock;
 use crate::rsi_server::MAX_REQUEST_LEN;
+use topspin_core::rsi::MAX_ANSWER_LEN;
 use topspin_core::rsi::identify::Identifier;
-use topspin_core::rsi::session::MAX_ANSWER_LEN;
 use topspin_core::time::{Duration, Instant};
 
 /// How long the receive call blocks at most, to look at the clock.

@@ -13,7 +13,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use crate::clock;
 use topspin_core::plan::StrikePlan;
-use topspin_core::rsi::session::{MAX_ANSWER_LEN, RsiSession, SessionEvent};
+use topspin_core::rsi::{MAX_ANSWER_LEN, RsiSession, SessionEvent};
 use topspin_core::time::Instant;
 
 /// Largest request read, bytes.

@@ -18,7 +18,7 @@ use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 use std::sync::mpsc::{Receiver, RecvTimeoutError, Sender, channel};
 use std::thread::JoinHandle;
 
-use topspin_core::rsi::codec::{Axes, KukaPose, RobFrame, SenFrame};
+use topspin_core::rsi::{Axes, KukaPose, RobFrame, SenFrame};
 
 use crate::rsi_server::MAX_REQUEST_LEN;
 
@@ -79,7 +79,7 @@ impl TouchListener {
     /// Binds `addr` and starts answering with `sentype` (the Ethernet
     /// configuration's SENTYPE).
     pub fn bind(addr: SocketAddr, sentype: &str) -> io::Result<Self> {
-        topspin_core::rsi::codec::check_text(sentype)
+        topspin_core::rsi::check_text(sentype)
             .map_err(|e| io::Error::new(io::ErrorKind::InvalidInput, format!("SENTYPE {sentype:?}: {e}")))?;
         let socket = UdpSocket::bind(addr)?;
         socket.set_read_timeout(Some(STOP_POLL))?;

@@ -13,7 +13,7 @@ use std::net::{SocketAddr, UdpSocket};
 use serde::Serialize;
 use topspin_core::stats::quantile_sorted;
 use topspin_core::time::Instant;
-use topspin_core::wire::observation::{Observation, WireError};
+use topspin_core::wire::{Observation, WireError};
 
 /// A resting ball's centre height, m (its radius).
 const BALL_RADIUS: f64 = 0.02;
@@ -222,7 +222,7 @@ pub fn listen(bind: SocketAddr, seconds: f64, now: impl Fn() -> Instant) -> io::
 #[cfg(test)]
 mod tests {
     use super::*;
-    use topspin_core::wire::observation::OBSERVATION_LEN;
+    use topspin_core::wire::OBSERVATION_LEN;
 
     fn datagram(seq: u32, capture_ns: u64, pos: [f32; 3]) -> [u8; OBSERVATION_LEN] {
         let mut b = [0u8; OBSERVATION_LEN];

@@ -133,7 +133,7 @@ fn bad_values_name_the_key() {
     let e = err(None, None, &[("TOPSPIN_RSI__CORRECTION", "joint")]);
     assert_eq!(e, "rsi.correction: \"joint\" is not \"cartesian\" or \"axis\"");
     let axis = load(None, None, &[("TOPSPIN_RSI__CORRECTION", "axis")]).unwrap();
-    assert_eq!(axis.rsi.correction(), topspin_core::rsi::session::Correction::Axis);
+    assert_eq!(axis.rsi.correction(), topspin_core::rsi::Correction::Axis);
 }
 
 #[test]
@@ -152,7 +152,7 @@ fn unreadable_or_broken_files_name_the_file() {
 
 #[test]
 fn the_session_learning_is_set_by_configuration() {
-    use topspin_core::estimator::session::LearnConfig;
+    use topspin_core::estimator::LearnConfig;
     // On by default, with the ball's own drag weighed at the compiled weight.
     let on = DaemonConfig::default().estimator_config();
     assert_eq!(on.learn, LearnConfig::default());

@@ -10,9 +10,9 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration as StdDuration;
 
 use topspin_core::calib::Calibration;
-use topspin_core::rsi::session::{RsiSession, SessionConfig};
+use topspin_core::rsi::{RsiSession, SessionConfig};
 use topspin_core::time::Instant;
-use topspin_core::wire::observation::{OBSERVATION_LEN, Observation};
+use topspin_core::wire::{OBSERVATION_LEN, Observation};
 use topspin_daemon::config::DaemonConfig;
 use topspin_daemon::rsi_server::{MAX_REQUEST_LEN, RsiServer, WaitStrategy, plan_slot};
 use topspin_daemon::runtime::daemon::{Daemon, RuntimeConfig};

@@ -14,7 +14,7 @@ use std::process::Command;
 use std::time::{Duration, Instant};
 
 use topspin_core::calib::Calibration;
-use topspin_core::wire::observation::Observation;
+use topspin_core::wire::Observation;
 use topspin_daemon::runtime::daemon::{Daemon, RuntimeConfig};
 
 const COUNT: u64 = 120;

@@ -3,7 +3,7 @@
 //! cut logos, the rotation fit on the true positions exact.
 
 use topspin_core::calib::Calibration;
-use topspin_core::calib::camera::CameraCalib;
+use topspin_core::calib::CameraCalib;
 use topspin_lab::logo::eval::{EvalOptions, evaluate, spin_errors, summarise};
 use topspin_sim::Setting;
 use topspin_sim::render::BallColour;

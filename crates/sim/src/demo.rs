@@ -34,14 +34,14 @@ use crate::truth::{Flight, HitTruth};
 use crate::udp_tracker::{capture_time, stream};
 use crate::{Redraws, SimBall, Strokes, TrackerModel, schedule};
 use topspin_core::calib::Calibration;
-use topspin_core::calib::camera::CameraCalib;
+use topspin_core::calib::CameraCalib;
 use topspin_core::ingest::IngestCounters;
-use topspin_core::logo::stream::LogoCounters;
+use topspin_core::logo::LogoCounters;
 use topspin_core::physics::{Propagator, Vec3, rad_to_rps};
 use topspin_core::plan::StrikePlan;
 use topspin_core::stats::Summary;
 use topspin_core::time::{Duration, Instant};
-use topspin_core::wire::crop::CROP_MAX_LEN;
+use topspin_core::wire::CROP_MAX_LEN;
 use topspin_daemon::clock;
 use topspin_daemon::runtime::daemon::{Daemon, DaemonSummary, LinkState, RuntimeConfig, ThreadSpec};
 use topspin_daemon::runtime::rt::RtWarning;
@@ -779,7 +779,7 @@ fn closest_approach(
 /// ball, the frames before the bounce).
 pub(crate) fn render_crops(cam: &CameraCalib, seed: u64, balls: &[SimBall]) -> Vec<Sequence> {
     let scene = Scene::new(cam.clone(), BallColour::Orange);
-    let opts = SequenceOptions { frames: topspin_core::logo::stream::SEQUENCE_LEN };
+    let opts = SequenceOptions { frames: topspin_core::logo::SEQUENCE_LEN };
     let render = |b: &SimBall| render_sequence(&scene, &b.truth, &b.physics, seed, b.index, &opts);
     // One chunk of balls per core, in order (no thread pool in the sim crate).
     let workers = std::thread::available_parallelism().map_or(1, |n| n.get());

@@ -16,7 +16,7 @@ use rand_chacha::ChaCha8Rng;
 use super::SimBall;
 use super::udp_tracker::{StreamStats, capture_time};
 use topspin_core::time::{Duration, Instant};
-use topspin_core::wire::observation::{OBSERVATION_LEN, Observation, ObservationPacket};
+use topspin_core::wire::{OBSERVATION_LEN, Observation, ObservationPacket};
 use topspin_daemon::clock;
 
 /// Longest datagram the injector writes (garbage included).

@@ -21,7 +21,7 @@ use crate::mock_krc::controller::{ControllerConfig, MockController, PathSample, 
 use crate::mock_krc::faults::{Faults, MAX_DATAGRAM};
 use crate::mock_krc::runner::MockResult;
 use topspin_core::plan::StrikePlan;
-use topspin_core::rsi::session::{RsiSession, SessionEvent};
+use topspin_core::rsi::{RsiSession, SessionEvent};
 use topspin_core::time::{Duration, Instant};
 
 /// The link's and the sensor's timing, on the virtual clock.

@@ -16,7 +16,7 @@
 //! same whatever else is rendered.
 //!
 //! The camera side is simulated as well: the ball's circle is *measured* in
-//! each rendered crop against the background ([`topspin_core::logo::ball`]), and the
+//! each rendered crop against the background ([`topspin_core::logo::measure_ball`]), and the
 //! crop is cut around the measured centre (the TTI1 convention, see
 //! [`crop_origin`]); the labels keep the true circle next to it.
 //!
@@ -29,15 +29,15 @@ use rand_distr::{Distribution, StandardNormal};
 
 use crate::truth::Flight;
 use crate::{Setting, Truth};
-use topspin_core::calib::camera::CameraCalib;
-use topspin_core::logo::ball::{self, Circle};
-use topspin_core::logo::detect::CropImage;
-use topspin_core::logo::pipeline::CropInput;
-use topspin_core::logo::view::BallView;
+use topspin_core::calib::CameraCalib;
+use topspin_core::logo::BallView;
+use topspin_core::logo::CropImage;
+use topspin_core::logo::CropInput;
+use topspin_core::logo::{Circle, measure_ball};
 use topspin_core::physics::{Propagator, Vec3};
 use topspin_core::time::Instant;
-use topspin_core::wire::crop::Crop as WireCrop;
-pub use topspin_core::wire::crop::crop_origin;
+use topspin_core::wire::Crop as WireCrop;
+pub use topspin_core::wire::crop_origin;
 
 /// Side of a crop, px (the paper's crops are 60 × 60).
 pub(crate) const CROP_SIZE: u32 = 60;
@@ -409,7 +409,7 @@ impl Scene {
             rng.set_stream(rng_seed.1);
             let c = self.render(Some(pose), origin.0, origin.1, CROP_SIZE, CROP_SIZE, &mut rng);
             let bg = self.background(origin.0, origin.1, CROP_SIZE, CROP_SIZE);
-            let m = ball::measure(&c.rgb, &bg.rgb, CROP_SIZE as usize, CROP_SIZE as usize, origin.0, origin.1)?;
+            let m = measure_ball(&c.rgb, &bg.rgb, CROP_SIZE as usize, CROP_SIZE as usize, origin.0, origin.1)?;
             let want = crop_origin(m.u, m.v, CROP_SIZE, CROP_SIZE);
             measured = Some(m);
             crop = Some(c);

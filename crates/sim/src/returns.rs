@@ -30,8 +30,8 @@ use crate::launcher::Launch;
 use crate::mock_krc::PathSample;
 use crate::truth::Flight;
 use topspin_core::calib::Calibration;
-use topspin_core::calib::robot::RobotFile;
-use topspin_core::estimator::aim::face_normal;
+use topspin_core::calib::RobotFile;
+use topspin_core::estimator::face_normal;
 use topspin_core::geometry::EulerZyx;
 use topspin_core::physics::{BallState, Bat, Event, Impact, Propagator, RacketModel, Regime, StopAt, Vec3};
 use topspin_core::plan::face_tilt;
@@ -545,8 +545,8 @@ mod tests {
     use super::*;
     use crate::launcher::{Power, Setting, SpinType};
     use crate::{TrackerModel, simulate_ball};
-    use topspin_core::estimator::aim::{AimBounds, aim, bat_velocity};
-    use topspin_core::estimator::stroke::paper_beta;
+    use topspin_core::estimator::paper_beta;
+    use topspin_core::estimator::{AimBounds, aim, bat_velocity};
 
     /// The ball's launch instant in these tests.
     const START: Instant = Instant(1_000_000_000);

@@ -9,7 +9,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use super::SimBall;
 use topspin_core::time::{Duration, Instant};
-use topspin_core::wire::observation::{OBSERVATION_LEN, Observation};
+use topspin_core::wire::{OBSERVATION_LEN, Observation};
 use topspin_daemon::clock;
 
 /// What a stream sent.

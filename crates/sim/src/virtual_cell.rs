@@ -25,9 +25,9 @@ use crate::{SimBall, schedule, simulate_in};
 use topspin_core::calib::Calibration;
 use topspin_core::estimator::{Estimator, EstimatorEvent};
 use topspin_core::ingest::{Ingest, IngestCounters};
-use topspin_core::logo::stream::{LogoCounters, LogoStream};
+use topspin_core::logo::{LogoCounters, LogoStream};
 use topspin_core::plan::StrikePlan;
-use topspin_core::rsi::session::{RsiSession, SessionConfig, SessionStats};
+use topspin_core::rsi::{RsiSession, SessionConfig, SessionStats};
 use topspin_core::time::{Duration, Instant};
 
 /// Where the virtual tracker's datagrams come from.

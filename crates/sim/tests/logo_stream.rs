@@ -1,11 +1,11 @@
-//! The logo thread's sans-IO stream (`topspin_core::logo::stream`) fed
+//! The logo thread's sans-IO stream (`topspin_core::logo::LogoStream`) fed
 //! with rendered crops of a simulated ball: one spin per ball, near the
 //! truth, repeated crops dropped.
 
 use topspin_core::calib::Calibration;
-use topspin_core::calib::camera::CameraCalib;
+use topspin_core::calib::CameraCalib;
 use topspin_core::logo::LogoMethod;
-use topspin_core::logo::stream::{LogoEngine, LogoStream, SEQUENCE_LEN};
+use topspin_core::logo::{LogoEngine, LogoStream, SEQUENCE_LEN};
 use topspin_core::physics::Vec3;
 use topspin_core::time::{Duration, Instant};
 use topspin_sim::render::{BallColour, Scene, SequenceOptions, render_sequence};

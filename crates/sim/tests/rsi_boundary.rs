@@ -9,9 +9,9 @@
 use topspin_core::calib::Calibration;
 use topspin_core::kinematics::{Joints, Pose};
 use topspin_core::motion::{MotionLimits, PlanRejected};
-use topspin_core::rsi::codec::KukaPose;
-use topspin_core::rsi::session::{ArmMode, RsiSession, SessionConfig, SessionEvent};
-use topspin_core::rsi::start::{LikelyFrame, StartRefused};
+use topspin_core::rsi::KukaPose;
+use topspin_core::rsi::{ArmMode, RsiSession, SessionConfig, SessionEvent};
+use topspin_core::rsi::{LikelyFrame, StartRefused};
 use topspin_core::time::{Duration, Instant};
 use topspin_sim::mock_krc::controller::ControllerConfig;
 use topspin_sim::mock_krc::{Faults, MockKrcConfig, PathSample};

@@ -10,7 +10,7 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use topspin_core::calib::Calibration;
-use topspin_core::rsi::session::{MAX_ANSWER_LEN, RsiSession, SessionConfig, SessionStats};
+use topspin_core::rsi::{MAX_ANSWER_LEN, RsiSession, SessionConfig, SessionStats};
 use topspin_core::time::{Duration, Instant};
 use topspin_daemon::rsi_server::{RsiServer, WaitStrategy, plan_slot};
 use topspin_sim::mock_krc::{self, Faults, MockKrcConfig, MockResult};
@@ -69,7 +69,7 @@ fn malformed_requests_never_crash_the_session() {
     let n = s.handle_datagram(Instant(8), b"<Rob><RIst X=\"1\"/><IPOC>1</IPOC></Rob>", &mut out).unwrap();
     assert!(std::str::from_utf8(&out[..n]).unwrap().contains("<IPOC>1</IPOC>"));
     assert_eq!((s.stats().malformed, s.stats().bad_values), (bad.len() as u64, 1));
-    assert_eq!(s.arm_mode(), topspin_core::rsi::session::ArmMode::Held);
+    assert_eq!(s.arm_mode(), topspin_core::rsi::ArmMode::Held);
     // And it still answers a good one afterwards.
     let n = s.handle_datagram(Instant(10), b"<Rob Type=\"KUKA\"><IPOC>5</IPOC></Rob>", &mut out).unwrap();
     assert!(std::str::from_utf8(&out[..n]).unwrap().contains("<IPOC>5</IPOC>"));

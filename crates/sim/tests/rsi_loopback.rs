@@ -31,7 +31,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use topspin_core::calib::Calibration;
 use topspin_core::motion::MotionLimits;
 use topspin_core::plan::StrikePlan;
-use topspin_core::rsi::session::{Correction, RsiSession, SessionConfig};
+use topspin_core::rsi::{Correction, RsiSession, SessionConfig};
 use topspin_core::time::Duration;
 use topspin_daemon::clock;
 use topspin_daemon::rsi_server::{RsiServer, WaitStrategy, plan_slot};
@@ -70,7 +70,7 @@ fn strikes_over_udp(correction: Correction) {
     let server_thread = std::thread::spawn(move || {
         server
             .run(&s2, &mut reader, |e| {
-                if let topspin_core::rsi::session::SessionEvent::PlanAccepted { seq, late_by, .. } = e
+                if let topspin_core::rsi::SessionEvent::PlanAccepted { seq, late_by, .. } = e
                     && late_by.0 > 0
                     && std::env::var("DBG").is_ok()
                 {

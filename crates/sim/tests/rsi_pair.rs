@@ -15,7 +15,7 @@
 
 use topspin_core::calib::Calibration;
 use topspin_core::motion::MotionLimits;
-use topspin_core::rsi::session::{Correction, RsiSession, SessionConfig, SessionEvent};
+use topspin_core::rsi::{Correction, RsiSession, SessionConfig, SessionEvent};
 use topspin_core::time::{Duration, Instant};
 use topspin_sim::mock_krc::controller::ControllerConfig;
 use topspin_sim::mock_krc::{Faults, MockKrcConfig, MockResult, StopReason};

@@ -6,7 +6,7 @@
 //! bad ball's bound), within stated tolerances where it is statistical.
 
 use topspin_core::calib::Calibration;
-use topspin_core::estimator::session::LearnConfig;
+use topspin_core::estimator::LearnConfig;
 use topspin_core::estimator::{EndReason, Estimator, EstimatorConfig, EstimatorEvent, LogoSpin};
 use topspin_core::physics::Vec3;
 use topspin_core::plan::StrikePlan;

@@ -31,7 +31,7 @@ use foxglove::messages::{FrameTransform, PosesInFrame, SceneUpdate};
 use topspin_core::calib::Calibration;
 use topspin_core::kinematics::{FRAMES, Joints};
 use topspin_core::physics::Vec3;
-use topspin_core::rsi::codec::RobFrame;
+use topspin_core::rsi::RobFrame;
 use topspin_core::time::Duration;
 use topspin_daemon::record::replay::replay_recording;
 use topspin_daemon::record::sink::RecordingSink;

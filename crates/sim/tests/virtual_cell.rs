@@ -42,7 +42,7 @@ fn logo_runtime(method: LogoMethodChoice) -> LogoRuntime {
         bind: "127.0.0.1:0".parse().expect("literal"),
         source: None,
         method,
-        camera: topspin_core::calib::camera::CameraCalib::default_camera(),
+        camera: topspin_core::calib::CameraCalib::default_camera(),
         camera_latency: Duration(0),
         thread: Default::default(),
     }

@@ -4,15 +4,20 @@
 
 use std::path::{Path, PathBuf};
 
-pub mod camera;
+pub(crate) mod camera;
 pub mod cell;
 
 use serde::{Deserialize, Serialize};
 
 use crate::physics::{PhysicsParams, Propagator, RacketModel, RacketParams, Table};
 
-pub mod robot;
-pub use robot::RobotFile;
+pub(crate) mod robot;
+pub use camera::{CameraCalib, CameraSection, DEFAULT_CAMERA, LogoSection};
+pub use robot::{
+    BadKey, CellPlacement, HomePose, JointAxes, PosCorrLimits, RobotModel, RsiTiming, ServoModel, StartPolicy,
+    TcpLimits, Workspace,
+};
+pub use robot::{RobotFile, lag_step};
 
 /// The compiled-in defaults (the repository's `calib/` folder).
 /// The repository's `calib/physics.toml`, compiled in.

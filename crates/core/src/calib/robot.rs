@@ -293,14 +293,14 @@ pub struct BadKey {
 }
 
 /// KUKA's T1 limit on the TCP's speed, mm/s: `[start] speed_mm_s` stays within it.
-pub const T1_SPEED_MM_S: f64 = 250.0;
+pub(crate) const T1_SPEED_MM_S: f64 = 250.0;
 /// The fastest commissioning turn `[start] rate_deg_s` may name, °/s.
-pub const MAX_COMMISSIONING_RATE_DEG_S: f64 = 90.0;
+pub(crate) const MAX_COMMISSIONING_RATE_DEG_S: f64 = 90.0;
 
 /// The longest dead time `[servo]` may name, ms.
-pub const MAX_DEAD_TIME_MS: f64 = 100.0;
+pub(crate) const MAX_DEAD_TIME_MS: f64 = 100.0;
 /// The longest lag `[servo]` may name, ms.
-pub const MAX_LAG_MS: f64 = 200.0;
+pub(crate) const MAX_LAG_MS: f64 = 200.0;
 
 fn positive(key: &'static str, v: &[f64]) -> Result<(), BadKey> {
     for &value in v {

@@ -39,7 +39,7 @@ pub(crate) const AIM_T_MAX: f64 = 1.5;
 /// Returns flown per plan at most (the estimator's hot path: a flight
 /// costs a few microseconds); an aim not converged within it goes on with
 /// the next observation's plan.
-pub const AIM_BUDGET: usize = 3;
+pub(crate) const AIM_BUDGET: usize = 3;
 /// Returns flown at one speed without landing the ball before a faster
 /// bat is tried.
 pub(crate) const LEVEL_FLIGHTS: usize = 10;
@@ -90,7 +90,7 @@ pub struct Aim {
     pub landing: Landing,
     /// Bat speed, m/s.
     pub speed: f64,
-    /// Which of the [`SPEED_STEPS`] speeds.
+    /// Which of the `SPEED_STEPS` speeds.
     pub speed_step: usize,
     /// The predicted ball it was aimed for.
     pub ball: BallState,
@@ -98,7 +98,7 @@ pub struct Aim {
     pub flights: usize,
     /// The target aimed at (moved back where the net was in the way), m.
     pub target: [f64; 2],
-    /// The landing is within [`AIM_TOLERANCE`] of the target and the net
+    /// The landing is within `AIM_TOLERANCE` of the target and the net
     /// is cleared.
     pub converged: bool,
     /// Where the search stands: (θ, ψ), the speed step, and ∂(landing x,
@@ -135,7 +135,7 @@ pub fn bat_velocity(tilt: f64, heading: f64, speed: f64) -> Vec3 {
 /// down to one radius over the table (a lob still up after [`AIM_T_MAX`]
 /// "lands" where it is then, so the landing moves continuously with the
 /// stroke); `None` if the state stops being finite.
-pub fn fly(prop: &Propagator, s: &BallState) -> Option<Landing> {
+pub(crate) fn fly(prop: &Propagator, s: &BallState) -> Option<Landing> {
     let r = prop.flight.radius();
     let net_top = prop.table.net_height;
     let mut s = *s;
@@ -163,7 +163,7 @@ pub fn fly(prop: &Propagator, s: &BallState) -> Option<Landing> {
 
 /// Where the ball `ball` lands when the face has tilt θ and heading ψ and
 /// the bat moves at `speed` (`None`: no contact, or no landing).
-pub fn landing(
+pub(crate) fn landing(
     prop: &Propagator,
     racket: &RacketModel,
     ball: &BallState,
@@ -290,7 +290,7 @@ impl AimBounds {
         AimBounds { tilt, arm: Some(arm), ..*self }
     }
 
-    /// The `k`-th of the [`SPEED_STEPS`] bat speeds, slowest first, at
+    /// The `k`-th of the `SPEED_STEPS` bat speeds, slowest first, at
     /// face tilt θ: no faster than the arm delivers there (the generator
     /// would slow it to that).
     pub fn speed(&self, k: usize, tilt: f64) -> f64 {

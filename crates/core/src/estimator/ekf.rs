@@ -16,7 +16,7 @@ use crate::physics::{BallState, Event, Propagator, StopAt, Vec3};
 
 /// A 9×9 matrix over the filter state (position, velocity, spin), such as
 /// its covariance.
-pub type M9 = SMatrix<f64, 9, 9>;
+pub(crate) type M9 = SMatrix<f64, 9, 9>;
 pub(crate) type V9 = SVector<f64, 9>;
 
 /// Longest step of the covariance propagation, s.

@@ -5,21 +5,21 @@
 //! per observation.
 //!
 //! Life cycle of a ball: observations after a gap open a *candidate*; once
-//! [`ACQUIRE_LEN`] of them are in, the paper's start filter removes false
+//! `ACQUIRE_LEN` of them are in, the paper's start filter removes false
 //! detections and a cubic fit gives the first state — if the ball moves
 //! towards the robot it becomes a *track* (EKF), otherwise it is dropped.
 //! A track ends when the ball goes silent, bounces a second time, passes
 //! the robot, is returned, stops, or leaves the volume, or when the gate
-//! rejects [`MAX_CONSECUTIVE_REJECTS`] observations in a row (another ball,
+//! rejects `MAX_CONSECUTIVE_REJECTS` observations in a row (another ball,
 //! or a real change of course): those observations then open a new
 //! candidate.
 
-pub mod aim;
-pub mod ekf;
-pub mod session;
+pub(crate) mod aim;
+pub(crate) mod ekf;
+pub(crate) mod session;
 mod smooth;
-pub mod spin_prior;
-pub mod stroke;
+pub(crate) mod spin_prior;
+pub(crate) mod stroke;
 
 use heapless::Vec as HVec;
 
@@ -35,9 +35,11 @@ use crate::motion::reach::ReachMap;
 use crate::physics::{FlightScales, Propagator, RacketModel, Vec3};
 use crate::plan::StrikePlan;
 use crate::time::Instant;
-use ekf::{Ekf, EkfNoise, Update};
-use session::{LearnConfig, LearnedSession};
-pub use stroke::Withheld;
+pub use aim::{Aim, AimBounds, ArmReach, Landing, aim, bat_velocity, face_normal};
+pub use ekf::{Ekf, EkfNoise, Update};
+pub use session::{LearnConfig, Learned, LearnedSession};
+pub use spin_prior::{SPIN_BIN_CENTRES, SPIN_BINS, SpinPrior};
+pub use stroke::{Withheld, paper_beta};
 
 /// Observations collected before a candidate becomes a track.
 pub(crate) const ACQUIRE_LEN: usize = 8;
@@ -86,7 +88,7 @@ pub struct EstimatorConfig {
     /// What the estimator learns across the session (drag, table).
     pub learn: LearnConfig,
     /// Re-read the pre-bounce flight in batches, with its drag, as it
-    /// grows ([`smooth`]): the filter alone reads fast spin low.
+    /// grows (`smooth`): the filter alone reads fast spin low.
     pub smooth: bool,
 }
 

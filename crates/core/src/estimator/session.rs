@@ -138,7 +138,7 @@ pub struct LearnedSession {
 
 /// χ² (3 dof) at 99.9 %: a bounce whose velocity after it lies farther
 /// from every table tried is not explained.
-pub const BOUNCE_GATE_CHI2: f64 = 16.27;
+pub(crate) const BOUNCE_GATE_CHI2: f64 = 16.27;
 
 impl LearnedSession {
     /// A session that starts from the calibration's table and the

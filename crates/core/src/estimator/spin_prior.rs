@@ -26,14 +26,14 @@ pub const SPIN_BINS: usize = 4;
 /// at the contact; the scale is interpolated linearly between them.
 pub const SPIN_BIN_CENTRES: [f64; SPIN_BINS] = [0.08, 0.2, 0.4, 0.8];
 /// Bounces a bin keeps (the latest).
-pub const BIN_MEMORY: usize = 16;
+pub(crate) const BIN_MEMORY: usize = 16;
 /// The grid of scales tried: ×0.5 to ×4 in steps of 2^(1/8).
 const SCALE_GRID: usize = 25;
 /// Most a bounce's normalised squared residual counts.
 const COST_CAP: f64 = 16.0;
 /// σ of ln(scale) about a bin's scale before it holds [`MIN_FOR_SHARE`]
 /// bounces: a flight's spin may be a third off (issue 30's real balls).
-pub const SHARE_START: f64 = 0.3;
+pub(crate) const SHARE_START: f64 = 0.3;
 /// Bounces a bin needs before its own spread counts.
 const MIN_FOR_SHARE: usize = 4;
 /// Bounds of a bin's spread.

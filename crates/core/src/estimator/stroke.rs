@@ -67,7 +67,7 @@ pub(crate) fn bat_velocity(cal: &StrikeCalib) -> Vec3 {
 
 /// Checks the hitting point against the window; `lead` is the time left
 /// until the hit, s.
-pub fn check(cal: &StrikeCalib, hit: &HitPoint, lead: f64) -> Result<(), Withheld> {
+pub(crate) fn check(cal: &StrikeCalib, hit: &HitPoint, lead: f64) -> Result<(), Withheld> {
     let p = hit.state.pos;
     if !(cal.window_y[0]..=cal.window_y[1]).contains(&p.y) {
         return Err(Withheld::OutsideY);

@@ -1,23 +1,28 @@
 //! Spin from a trajectory, and what follows from it (paper §IV, DESIGN §3).
 //!
-//! - [`poly`]: least-squares cubic per axis (time centred and scaled).
-//! - [`magnus`]: the paper's linear solve of k_M ω × P′ = P″ + k_D‖P′‖P′ + g e_z.
-//! - [`outlier`]: the paper's start-of-trajectory filter (sliding five-ball fits).
+//! - `poly`: least-squares cubic per axis (time centred and scaled).
+//! - `magnus`: the paper's linear solve of k_M ω × P′ = P″ + k_D‖P′‖P′ + g e_z.
+//! - `outlier`: the paper's start-of-trajectory filter (sliding five-ball fits).
 //! - [`refine`]: our refinement: the flight model itself fitted to the
 //!   positions (Levenberg–Marquardt over initial position, velocity and
 //!   spin, robust weights), with the spin's observability.
 //! - [`predict`]: next table contact and the crossing of the hitting plane.
-//! - [`trajectory`]: the pipeline over one recorded flight.
+//! - `trajectory`: the pipeline over one recorded flight.
 //!
 //! Offline code paths may allocate; the pieces the streaming estimator
 //! reuses (`poly`, `magnus`, `predict`) do not.
 
-pub mod magnus;
-pub mod outlier;
-pub mod poly;
-pub mod predict;
-pub mod refine;
-pub mod trajectory;
+pub(crate) mod magnus;
+pub(crate) mod outlier;
+pub(crate) mod poly;
+pub(crate) mod predict;
+pub(crate) mod refine;
+pub(crate) mod trajectory;
+pub use magnus::{MagnusSolve, solve as solve_magnus};
+pub use outlier::StartFilter;
+pub use poly::Cubic;
+pub use refine::{RefineConfig, Refined, refine};
+pub use trajectory::{FitConfig, FitError, MIN_SAMPLES, Method, TrajectoryFit, fit_trajectory};
 
 use crate::physics::Vec3;
 
@@ -37,5 +42,4 @@ impl Sample {
     }
 }
 
-pub use predict::{Contact, HitPoint, Prediction, predict};
-pub use trajectory::{FitConfig, FitError, Method, TrajectoryFit, fit_trajectory};
+pub use predict::{Contact, FlightEnd, HitPoint, Prediction, predict};

@@ -15,7 +15,7 @@ pub(crate) const PREDICTION_HORIZON: f64 = 2.0;
 /// inside the step. The estimator predicts on every observation: 10 ms
 /// against the propagator's 4 ms takes its per-observation p99 back under
 /// the 50 µs budget.
-pub const PREDICT_STEP: f64 = 0.010;
+pub(crate) const PREDICT_STEP: f64 = 0.010;
 
 /// A predicted table contact.
 #[derive(Copy, Clone, Debug, PartialEq)]
@@ -101,7 +101,7 @@ pub fn predict(prop: &Propagator, state: &BallState, t: f64, hit_plane_x: f64) -
 /// most one bounce on the robot's half): `out[k]` for plane k, `None` where
 /// the ball is past it already or the flight ends first. One integration
 /// for all of them.
-pub fn crossings<const N: usize>(
+pub(crate) fn crossings<const N: usize>(
     prop: &Propagator,
     state: &BallState,
     t: f64,

@@ -78,7 +78,7 @@ pub struct RefineConfig {
 /// reach 100–175 rps (DESIGN §3), so 800 rad/s (127 rps) is weak; it
 /// matters only where the lift saturates and a flight no longer tells the
 /// spin's size. Shared with the estimator's pre-bounce batches.
-pub const SPIN_PRIOR_STD: f64 = 800.0;
+pub(crate) const SPIN_PRIOR_STD: f64 = 800.0;
 
 impl Default for RefineConfig {
     fn default() -> Self {

@@ -10,7 +10,7 @@
 //! the last one with a newer capture time, or far behind it, is a tracker
 //! restart, not reordering.
 
-pub mod clock;
+pub(crate) mod clock;
 
 use std::net::{IpAddr, SocketAddr};
 
@@ -80,7 +80,7 @@ pub struct IngestCounters {
 /// use std::net::SocketAddr;
 /// use topspin_core::ingest::{Dropped, Ingest};
 /// use topspin_core::time::Instant;
-/// use topspin_core::wire::observation::{OBSERVATION_LEN, Observation};
+/// use topspin_core::wire::{OBSERVATION_LEN, Observation};
 ///
 /// let tracker: SocketAddr = "192.168.1.20:5000".parse().unwrap();
 /// let mut ingest = Ingest::new(Some(tracker.ip()), 0);

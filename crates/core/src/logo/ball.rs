@@ -28,9 +28,9 @@ pub struct Circle {
 
 /// Measures the ball in an RGB8 crop of `width` × `height` whose top-left
 /// pixel is (x0, y0) on the sensor, against the background `bg` of the
-/// same block. `None` when no blob of [`BALL_MIN_AREA`] pixels stands out
+/// same block. `None` when no blob of `BALL_MIN_AREA` pixels stands out
 /// (or the buffers do not match the size). Allocates nothing.
-pub fn measure(rgb: &[u8], bg: &[u8], width: usize, height: usize, x0: i64, y0: i64) -> Option<Circle> {
+pub fn measure_ball(rgb: &[u8], bg: &[u8], width: usize, height: usize, x0: i64, y0: i64) -> Option<Circle> {
     let n = width.checked_mul(height)?;
     if rgb.len() != 3 * n || bg.len() != 3 * n || n == 0 {
         return None;
@@ -79,10 +79,10 @@ mod tests {
                 }
             }
         }
-        let c = measure(&rgb, &bg, w, h, 100, 200).unwrap();
+        let c = measure_ball(&rgb, &bg, w, h, 100, 200).unwrap();
         assert!((c.u - 100.0 - cu).abs() < 0.2 && (c.v - 200.0 - cv).abs() < 0.2, "{c:?}");
         assert!((c.radius - r).abs() < 0.5, "{c:?}");
-        assert!(measure(&bg, &bg, w, h, 0, 0).is_none());
-        assert!(measure(&rgb[..10], &bg, w, h, 0, 0).is_none());
+        assert!(measure_ball(&bg, &bg, w, h, 0, 0).is_none());
+        assert!(measure_ball(&rgb[..10], &bg, w, h, 0, 0).is_none());
     }
 }

@@ -95,7 +95,7 @@ const RETRY_NUDGES_S: [f64; 4] = [-0.0003, 0.0003, -0.0007, 0.0007];
 /// at, where it still arrives on time: a time-optimal stroke ends in
 /// limit-bound acceleration, where a refinement can only arrive late; the
 /// rest is room for blending refinements in ([`super::blend`]).
-pub const HEADROOM_FRACTION: f64 = 0.7;
+pub(crate) const HEADROOM_FRACTION: f64 = 0.7;
 /// Instants between now and the hit at which the path of a stroke (with
 /// headroom, at the full limits) or a blend is checked.
 const PATH_CHECKS: usize = 16;
@@ -105,10 +105,10 @@ const RATE_CHECK_S: f64 = 0.001;
 /// … at most this many times (a blend over 0.25 s is checked coarser).
 const MAX_RATE_CHECKS: usize = 256;
 /// Share of the stroke's limits for follow-through and return.
-pub const CALM_LIMIT_FRACTION: f64 = 0.5;
+pub(crate) const CALM_LIMIT_FRACTION: f64 = 0.5;
 /// A new ball's stroke arriving later than this is refused, s (the bat
 /// would be ~4 cm behind a ball crossing at 4 m/s).
-pub const MAX_LATE_S: f64 = 0.010;
+pub(crate) const MAX_LATE_S: f64 = 0.010;
 
 /// What the generator is doing.
 #[derive(Copy, Clone, Debug, PartialEq, Eq)]
@@ -132,10 +132,10 @@ pub enum PlanRejected {
     /// The hitting time is not after the current setpoint time.
     #[error("hit time is in the past")]
     HitInPast,
-    /// The hitting time is beyond [`MAX_PLAN_HORIZON_S`].
+    /// The hitting time is beyond `MAX_PLAN_HORIZON_S`.
     #[error("hit time too far ahead")]
     TooFarAhead,
-    /// The hitting point is more than [`MAX_OUTSIDE_M`] outside the box.
+    /// The hitting point is more than `MAX_OUTSIDE_M` outside the box.
     #[error("hitting point outside the workspace")]
     OutsideWorkspace,
     /// Ruckig found no trajectory (should not happen after sanitising).
@@ -151,7 +151,7 @@ pub enum PlanRejected {
     /// The stroke arrives too late, within the axes' limits.
     #[error("stroke would arrive too late")]
     TooLate,
-    /// The stroke's path would come within [`PATH_LIMIT_MARGIN_RAD`] of a
+    /// The stroke's path would come within `PATH_LIMIT_MARGIN_RAD` of a
     /// software limit switch or take the TCP out of the workspace (its box
     /// or orientation range, where the safety filter brakes):
     /// Ruckig's fastest profile may swing an axis past its target to turn

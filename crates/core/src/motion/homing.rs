@@ -30,9 +30,9 @@ use crate::geometry::{Pose6, unwrap_near};
 use crate::kinematics::{AXES, Arm, Joints, LimitViolation};
 
 /// Poses checked along the way (the start and home included).
-pub const PATH_SAMPLES: usize = 129;
+pub(crate) const PATH_SAMPLES: usize = 129;
 /// Length of the speed's ramp up (and down), s.
-pub const RAMP_S: f64 = 0.4;
+pub(crate) const RAMP_S: f64 = 0.4;
 /// The path between two samples may run this much faster than its chord.
 const CHORD_MARGIN: f64 = 1.05;
 /// The TCP may stand this much further outside the box than at the start, m.
@@ -257,7 +257,7 @@ impl HomingPath {
 
 /// The correction `pose − start` as the controller adds it (mm, degrees,
 /// angles within ±180°) within POSCORR and POSCORRMON.
-pub fn check_poscorr(lim: &HomingLimits, start: &Pose6, pose: &Pose6) -> Result<(), WayHomeBlocked> {
+pub(crate) fn check_poscorr(lim: &HomingLimits, start: &Pose6, pose: &Pose6) -> Result<(), WayHomeBlocked> {
     let k = correction(start, pose);
     let trans = (k[0] * k[0] + k[1] * k[1] + k[2] * k[2]).sqrt();
     let rot = (k[3] * k[3] + k[4] * k[4] + k[5] * k[5]).sqrt();
@@ -273,7 +273,7 @@ pub fn check_poscorr(lim: &HomingLimits, start: &Pose6, pose: &Pose6) -> Result<
 }
 
 /// RKorr for `pose` from `start`: mm and degrees, each angle within ±180°.
-pub fn correction(start: &Pose6, pose: &Pose6) -> [f64; 6] {
+pub(crate) fn correction(start: &Pose6, pose: &Pose6) -> [f64; 6] {
     core::array::from_fn(|i| {
         if i < 3 {
             (pose[i] - start[i]) * 1e3

@@ -7,15 +7,15 @@
 
 /// Share of each axis's speed and acceleration a stroke may use (the rest
 /// absorbs the lag's feed-forward and the refinements to come).
-pub const JOINT_LIMIT_FRACTION: f64 = 0.97;
+pub(crate) const JOINT_LIMIT_FRACTION: f64 = 0.97;
 
 /// Time for an axis to reach full acceleration (sets the jerk limit), s.
-pub const JERK_RAMP_S: f64 = 0.0125;
+pub(crate) const JERK_RAMP_S: f64 = 0.0125;
 
 /// A stroke's targets keep this far inside the software limits, rad (the
 /// path between may overshoot its ends a little, and the lag's
 /// feed-forward leads it).
-pub const LIMIT_MARGIN_RAD: f64 = 10.0 * std::f64::consts::PI / 180.0;
+pub(crate) const LIMIT_MARGIN_RAD: f64 = 10.0 * std::f64::consts::PI / 180.0;
 
 /// A stroke at the full limits keeps this far inside the software limits
 /// all along its path, rad: Ruckig's fastest profile may swing an axis
@@ -24,25 +24,25 @@ pub const LIMIT_MARGIN_RAD: f64 = 10.0 * std::f64::consts::PI / 180.0;
 /// there; the margin covers the instants between the generator's path
 /// checks (under half a degree at full acceleration over half a second).
 /// A wider margin refuses strokes the arm can play.
-pub const PATH_LIMIT_MARGIN_RAD: f64 = 2.0 * std::f64::consts::PI / 180.0;
+pub(crate) const PATH_LIMIT_MARGIN_RAD: f64 = 2.0 * std::f64::consts::PI / 180.0;
 
 /// How far inside the workspace box a stroke's path keeps the TCP at the
 /// generator's path checks, m: between two checks the TCP moves on by up
 /// to ~0.6 mm where it turns (a run-up's far end).
-pub const PATH_WALL_MARGIN_M: f64 = 0.002;
+pub(crate) const PATH_WALL_MARGIN_M: f64 = 0.002;
 
 /// A stroke's face keeps this far inside the workspace's orientation
 /// range (`workspace.abc_range_deg`), rad: the joint-space path into and
 /// out of the hitting pose turns the bat on past it, and the safety filter
 /// brakes a stroke that would leave the range (a step the axes feel).
-pub const ORIENTATION_MARGIN_RAD: f64 = 10.0 * std::f64::consts::PI / 180.0;
+pub(crate) const ORIENTATION_MARGIN_RAD: f64 = 10.0 * std::f64::consts::PI / 180.0;
 
 /// A stroke's targets keep A3 this far from the stretched elbow, rad.
-pub const ELBOW_MARGIN_RAD: f64 = 10.0 * std::f64::consts::PI / 180.0;
+pub(crate) const ELBOW_MARGIN_RAD: f64 = 10.0 * std::f64::consts::PI / 180.0;
 
 /// A stroke's joints keep |A5| at least this many times the singular
 /// threshold, on the same side as now.
-pub const WRIST_MARGIN: f64 = 5.0;
+pub(crate) const WRIST_MARGIN: f64 = 5.0;
 
 /// Step used to turn a bat velocity into joint velocities, s.
 pub(crate) const VELOCITY_STEP_S: f64 = 1e-3;

@@ -127,25 +127,25 @@ pub(crate) const REST_HALVINGS: usize = 3;
 /// threshold, 5°), since the follow-through, the lag's feed-forward and a
 /// late refinement all move the wrist on from the hitting pose, and near
 /// A5 = 0 a centimetre of TCP motion turns A4 and A6 by tens of degrees.
-pub const REACH_WRIST_DEG: f64 = 15.0;
+pub(crate) const REACH_WRIST_DEG: f64 = 15.0;
 
 /// The grid's spacing in y and z, m.
-pub const REACH_GRID_M: f64 = 0.05;
+pub(crate) const REACH_GRID_M: f64 = 0.05;
 /// The face tilts the map holds, in steps of this many degrees.
-pub const REACH_TILT_STEP_DEG: f64 = 5.0;
+pub(crate) const REACH_TILT_STEP_DEG: f64 = 5.0;
 /// Most tilts one map holds (±40° in 5° steps: 17).
-pub const REACH_TILTS: usize = 33;
+pub(crate) const REACH_TILTS: usize = 33;
 
 /// The fastest bat, m/s, along the face's normal at each tilt of the map
 /// at one point (0: the arm cannot present that face there).
-pub type SpeedCaps = [f64; REACH_TILTS];
+pub(crate) type SpeedCaps = [f64; REACH_TILTS];
 
 /// The blade's rolls about the face's normal tried at each point and tilt,
 /// degrees from the stroke's own (`strike` C), nearest first. The roll
 /// leaves the face where it is (the contact model sees only the normal)
 /// but moves the wrist: at 20 cm over the table a face opened by 30° puts
 /// A5 on its singularity unrolled, and 40° from it rolled by 30°.
-pub const REACH_ROLLS_DEG: [f64; 7] = [0.0, 15.0, -15.0, 30.0, -30.0, 45.0, -45.0];
+pub(crate) const REACH_ROLLS_DEG: [f64; 7] = [0.0, 15.0, -15.0, 30.0, -30.0, 45.0, -45.0];
 /// A roll nearer the stroke's own that lets the bat this near the fastest
 /// allowed (a share of `max_bat_speed`) is taken before any further one.
 const ROLL_GAIN: f64 = 0.9;
@@ -273,7 +273,7 @@ impl ReachMap {
 /// `o` (T) that the axes deliver from home — what the generator would
 /// slow a faster one to — or 0 where the arm cannot present that face
 /// there clear of its limits (A5 at least [`REACH_WRIST_DEG`] from 0).
-pub fn speed_cap(lim: &MotionLimits, point: Vec3, o: EulerZyx) -> f64 {
+pub(crate) fn speed_cap(lim: &MotionLimits, point: Vec3, o: EulerZyx) -> f64 {
     let p = lim.point_t_to_b(point);
     let abc = lim.orientation_t_to_b(o);
     // The generator clamps the orientation to within a margin of the

@@ -5,17 +5,17 @@
 //! sensitivities to its start and its drag and lift. Pure functions of their
 //! inputs: no clock, no I/O, no allocation.
 
-pub mod bounce;
-pub mod flight;
-pub mod params;
-pub mod propagate;
-pub mod racket;
-pub mod sensitivity;
-pub mod table;
+pub(crate) mod bounce;
+pub(crate) mod flight;
+pub(crate) mod params;
+pub(crate) mod propagate;
+pub(crate) mod racket;
+pub(crate) mod sensitivity;
+pub(crate) mod table;
 
 pub use bounce::BounceModel;
 pub use flight::{FlightModel, FlightScales, LiftModel, LiftPoints};
-pub use params::{FlightVariation, PhysicsParams};
+pub use params::{FlightVariation, InvalidParam, PhysicsParams};
 pub use propagate::{Event, Propagator, StopAt};
 pub use racket::{Bat, Impact, RacketModel, RacketParams, Regime};
 pub use sensitivity::Sensitivities;

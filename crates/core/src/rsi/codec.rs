@@ -107,7 +107,7 @@ pub enum CodecError {
     /// The output buffer is too small.
     #[error("output buffer too small")]
     BufferTooSmall,
-    /// A value to emit is not finite or larger than [`MAX_ABS_VALUE`].
+    /// A value to emit is not finite or larger than `MAX_ABS_VALUE`.
     #[error("value not finite or out of range")]
     ValueOutOfRange,
     /// A text to emit is too long or contains `<`, `>`, `&`, `"` or `'`.

@@ -15,7 +15,7 @@ use heapless::Deque;
 use crate::kinematics::{AXES, Arm, Joints, Pose};
 
 /// The longest dead time the monitor models, cycles.
-pub const MAX_DEAD_CYCLES: usize = 31;
+pub(crate) const MAX_DEAD_CYCLES: usize = 31;
 
 /// How far the arm strays from the model (see the module doc).
 #[derive(Clone, Debug)]

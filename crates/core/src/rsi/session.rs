@@ -412,8 +412,8 @@ pub enum ConfigError {
 /// ```
 /// use topspin_core::calib::Calibration;
 /// use topspin_core::motion::MotionLimits;
-/// use topspin_core::rsi::codec::{KukaPose, RobElement, RobFrame, SenFrame};
-/// use topspin_core::rsi::session::{RsiSession, SessionConfig};
+/// use topspin_core::rsi::{KukaPose, RobElement, RobFrame, SenFrame};
+/// use topspin_core::rsi::{RsiSession, SessionConfig};
 /// use topspin_core::time::Instant;
 ///
 /// let cal = Calibration::default_cell();

@@ -219,7 +219,7 @@ pub struct Start {
 }
 
 /// How far `pose` (B, m and rad) is from the cell's home: mm and degrees.
-pub fn from_home(lim: &MotionLimits, pose: &Pose6) -> (f64, f64) {
+pub(crate) fn from_home(lim: &MotionLimits, pose: &Pose6) -> (f64, f64) {
     let (d, a) = Pose::from_pose6(pose).distance(&Pose::from_pose6(&lim.home));
     (d * 1e3, a.to_degrees())
 }

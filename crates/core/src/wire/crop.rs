@@ -23,7 +23,7 @@ use crate::time::Instant;
 /// Bytes before the pixels.
 pub(crate) const CROP_HEADER_LEN: usize = 36;
 /// Largest crop side, px.
-pub const CROP_MAX_SIDE: u16 = 96;
+pub(crate) const CROP_MAX_SIDE: u16 = 96;
 /// Largest datagram: a 96 × 96 RGB8 crop.
 pub const CROP_MAX_LEN: usize = CROP_HEADER_LEN + 3 * 96 * 96;
 /// The four bytes every crop datagram starts with.
@@ -48,7 +48,7 @@ pub enum CropError {
         /// The first four bytes received.
         magic: [u8; 4],
     },
-    /// Width or height is 0 or above [`CROP_MAX_SIDE`].
+    /// Width or height is 0 or above `CROP_MAX_SIDE`.
     #[error("crop of {width} × {height} px (each side 1..=96)")]
     BadSize {
         /// The declared crop width, px.
@@ -191,7 +191,7 @@ pub struct Crop<'a> {
     /// Capture time on the camera's clock (as parsed; the daemon maps it
     /// to ours).
     pub capture: Instant,
-    /// Ball centre column (full sensor, px); finite, |u| ≤ [`CROP_MAX_COORD`].
+    /// Ball centre column (full sensor, px); finite, |u| ≤ `CROP_MAX_COORD`.
     pub u: f32,
     /// Ball centre row (full sensor, px); finite, |v| ≤ `CROP_MAX_COORD`.
     pub v: f32,

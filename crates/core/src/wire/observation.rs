@@ -70,7 +70,7 @@ pub enum WireError {
     /// A coordinate is NaN or infinite.
     #[error("observation with a non-finite coordinate")]
     NonFinite,
-    /// The position lies outside [`POSITION_BOX`].
+    /// The position lies outside `POSITION_BOX`.
     #[error("observation at ({x}, {y}, {z}) m lies outside the plausible box")]
     OutOfBox {
         /// x of the rejected position, m, table frame.
@@ -232,7 +232,7 @@ pub struct Observation {
     /// Capture time on the tracker's monotonic clock.
     pub capture: Instant,
     /// Ball centre (x, y, z) in m, table frame; finite and inside
-    /// [`POSITION_BOX`].
+    /// `POSITION_BOX`.
     pub pos: [f32; 3],
     /// Triangulation residual in m; NaN when unknown.
     pub residual: f32,
@@ -277,7 +277,7 @@ impl Observation {
 
     /// Writes this observation into `buf`. Writes the fields as they are;
     /// `parse` of the result succeeds when the value is valid (finite
-    /// position inside [`POSITION_BOX`], residual NaN or ≥ 0).
+    /// position inside `POSITION_BOX`, residual NaN or ≥ 0).
     pub fn emit(&self, buf: &mut [u8; OBSERVATION_LEN]) {
         let Ok(mut p) = ObservationPacket::new_emit(&mut buf[..]) else {
             unreachable!("the buffer has exactly OBSERVATION_LEN bytes")

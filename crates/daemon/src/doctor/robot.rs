@@ -2,7 +2,7 @@
 //! `network.rsi_bind` for the controller's RSI requests, answering each
 //! with a zero correction as `calibrate cell --rsi` does (nothing moves),
 //! and says what `topspin run` would do with the arm where it stands
-//! ([`topspin_core::rsi::start::assess`]):
+//! ([`topspin_core::rsi::assess`]):
 //! - pass: the arm is home, `RIst` the kinematics of `AIPos` under the
 //!   calibration's tool and base;
 //! - warn: off home, the way home at the commissioning speed is clear (the
@@ -12,8 +12,8 @@
 
 use topspin_core::calib::Calibration;
 use topspin_core::motion::MotionLimits;
-use topspin_core::rsi::session::SessionConfig;
-use topspin_core::rsi::start::{StartRefused, Verdict, assess};
+use topspin_core::rsi::SessionConfig;
+use topspin_core::rsi::{StartRefused, Verdict, assess};
 
 use super::Check;
 use crate::config::DaemonConfig;
@@ -48,8 +48,8 @@ pub fn check(cfg: &DaemonConfig, cal: &Calibration, wait_s: f64) -> Check {
 /// The verdict on one request's `RIst` and `AIPos`.
 pub fn judge(
     cal: &Calibration,
-    rist: Option<topspin_core::rsi::codec::KukaPose>,
-    aipos: Option<topspin_core::rsi::codec::Axes>,
+    rist: Option<topspin_core::rsi::KukaPose>,
+    aipos: Option<topspin_core::rsi::Axes>,
 ) -> Check {
     let s = SessionConfig::from_calibration(cal, "ImFree");
     let lim = MotionLimits::from_robot(&cal.robot);
@@ -71,7 +71,7 @@ pub fn judge(
 mod tests {
     use super::*;
     use crate::doctor::Status;
-    use topspin_core::rsi::codec::KukaPose;
+    use topspin_core::rsi::KukaPose;
 
     #[test]
     fn the_start_is_judged_as_the_daemon_would() {

@@ -63,7 +63,7 @@ use topspin_core::geometry::EulerZyx;
 use topspin_core::physics::Vec3;
 use topspin_core::plan::StrikePlan;
 use topspin_core::time::Instant;
-use topspin_core::wire::observation::Observation;
+use topspin_core::wire::Observation;
 
 pub use reader::{RecordedDatagram, RecordedExchange, Recording, read_recording};
 pub use writer::Recorder;

@@ -26,17 +26,17 @@ use crate::clock;
 use crate::rsi_server::{PlanReader, RsiServer, RsiSink, WaitStrategy, plan_slot};
 use topspin_cnn::{Backend, LogoCnn};
 use topspin_core::calib::Calibration;
-use topspin_core::calib::camera::CameraCalib;
+use topspin_core::calib::CameraCalib;
 use topspin_core::estimator::{Estimator, EstimatorConfig, LogoSpin};
-use topspin_core::ingest::clock::ClockMap;
+use topspin_core::ingest::ClockMap;
 use topspin_core::ingest::{Accepted, Ingest, IngestCounters};
-use topspin_core::logo::pipeline::LogoMethod;
-use topspin_core::logo::stream::{LogoCounters, LogoEngine, LogoStream};
-use topspin_core::motion::generator::Phase;
-use topspin_core::rsi::session::{RsiSession, SessionConfig, SessionEvent, SessionStats};
+use topspin_core::logo::LogoMethod;
+use topspin_core::logo::{LogoCounters, LogoEngine, LogoStream};
+use topspin_core::motion::Phase;
+use topspin_core::rsi::{RsiSession, SessionConfig, SessionEvent, SessionStats};
 use topspin_core::time::{Duration, Instant};
-use topspin_core::wire::crop::crop_origin;
-use topspin_core::wire::crop::{CROP_MAX_LEN, Crop};
+use topspin_core::wire::crop_origin;
+use topspin_core::wire::{CROP_MAX_LEN, Crop};
 
 /// Capacity of the logo → estimator ring, spins (one per ball).
 pub(crate) const LOGO_SPIN_RING: usize = 8;
@@ -97,7 +97,7 @@ pub struct RuntimeConfig {
     /// Tracker noise σ per axis, m.
     pub tracker_noise: f64,
     /// What the estimator learns across the session (`[estimator]`).
-    pub learn: topspin_core::estimator::session::LearnConfig,
+    pub learn: topspin_core::estimator::LearnConfig,
     /// The tracker's capture → datagram latency, added to the clock mapping.
     pub tracker_fixed_latency: Duration,
     /// `Type` of `<Sen>` in the answers.
@@ -111,7 +111,7 @@ pub struct RuntimeConfig {
     /// Compensate the robot's dead time and lag (`[servo]`).
     pub servo_compensation: bool,
     /// Cartesian (RKorr) or axis (AKorr) correction (`[rsi] correction`).
-    pub correction: topspin_core::rsi::session::Correction,
+    pub correction: topspin_core::rsi::Correction,
 }
 
 /// The logo thread's settings.
@@ -177,14 +177,14 @@ impl RuntimeConfig {
             rsi_wait: WaitStrategy::Blocking,
             estimator_busy_poll: false,
             tracker_noise: 0.002,
-            learn: topspin_core::estimator::session::LearnConfig::default(),
+            learn: topspin_core::estimator::LearnConfig::default(),
             tracker_fixed_latency: Duration::from_millis(2),
             sentype: "ImFree".to_owned(),
             log_interval_s: 10.0,
             record_rsi: false,
             logo: None,
             servo_compensation: true,
-            correction: topspin_core::rsi::session::Correction::Cartesian,
+            correction: topspin_core::rsi::Correction::Cartesian,
         }
     }
 }
@@ -589,7 +589,7 @@ fn logo_loop(
 
 /// A crop for the viewer, with the ball and the logo in the crop's pixels
 /// (TTI1 carries the ball's circle in the camera's).
-pub(crate) fn logo_record(c: &Crop<'_>, logo: Option<topspin_core::logo::stream::SeenLogo>) -> LogoRecord {
+pub(crate) fn logo_record(c: &Crop<'_>, logo: Option<topspin_core::logo::SeenLogo>) -> LogoRecord {
     let mut pixels = [0u8; 3 * LOGO_CROP_SIDE * LOGO_CROP_SIDE];
     let n = c.pixels.len().min(pixels.len());
     pixels[..n].copy_from_slice(&c.pixels[..n]);
@@ -716,7 +716,7 @@ mod tests {
         assert_eq!(next_link(LinkState::Home, &going), Some(LinkState::Moving));
         assert_eq!(next_link(LinkState::Moving, &SessionEvent::Home), Some(LinkState::Home));
         let refused = SessionEvent::StartRefused {
-            reason: topspin_core::rsi::start::StartRefused::Missing("RIst"),
+            reason: topspin_core::rsi::StartRefused::Missing("RIst"),
             from_mm: 0.0,
             from_deg: 0.0,
         };

@@ -16,7 +16,7 @@ use topspin_core::estimator::EstimatorEvent;
 use topspin_core::ingest::{Dropped, IngestCounters};
 use topspin_core::physics::{BallState, Vec3};
 use topspin_core::plan::StrikePlan;
-use topspin_core::rsi::session::SessionEvent;
+use topspin_core::rsi::SessionEvent;
 use topspin_core::time::Instant;
 
 /// Capacity of each thread's telemetry ring, events.

@@ -7,7 +7,7 @@
 //! robot's dead time and lag) this way on `/view/robot`. Cold path.
 
 use foxglove::messages as fm;
-use topspin_core::calib::robot::RobotFile;
+use topspin_core::calib::RobotFile;
 use topspin_core::kinematics::{ArmGeometry, FRAMES, Joints};
 use topspin_core::physics::Vec3;
 

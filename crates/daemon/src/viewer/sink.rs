@@ -23,11 +23,11 @@ use crate::runtime::telemetry::{
 use topspin_core::calib::Calibration;
 use topspin_core::estimator::EstimatorEvent;
 use topspin_core::kinematics::Joints;
-use topspin_core::physics::propagate::{Event, StopAt};
 use topspin_core::physics::{BallState, Propagator, Vec3, rad_to_rps};
+use topspin_core::physics::{Event, StopAt};
 use topspin_core::plan::StrikePlan;
-use topspin_core::rsi::codec::{KukaPose, RobFrame, SenFrame};
-use topspin_core::rsi::session::SessionEvent;
+use topspin_core::rsi::SessionEvent;
+use topspin_core::rsi::{KukaPose, RobFrame, SenFrame};
 use topspin_core::time::{Duration, Instant};
 
 /// A bat's orientation with its z axis turned onto its x axis (a quarter
@@ -776,7 +776,7 @@ fn logo_annotations(l: &LogoRecord, ts: Option<fm::Timestamp>) -> fm::ImageAnnot
 mod tests {
     use super::*;
     use crate::runtime::daemon::logo_record;
-    use topspin_core::wire::crop::Crop;
+    use topspin_core::wire::Crop;
 
     fn sink() -> ViewerSink {
         ViewerSink::new(&Calibration::default_cell(), None, None, None)
@@ -856,7 +856,7 @@ mod tests {
         let pixels = vec![0u8; 60 * 60 * 3];
         for (u, v) in [(1500.3f32, 400.7f32), (30.0, 30.0), (1869.9, 1079.2)] {
             let crop = Crop { seq: 1, capture: Instant(5), u, v, radius: 11.5, width: 60, height: 60, pixels: &pixels };
-            let seen = topspin_core::logo::stream::SeenLogo { crop_px: [33.0, 27.5], table: Vec3::z() };
+            let seen = topspin_core::logo::SeenLogo { crop_px: [33.0, 27.5], table: Vec3::z() };
             let ann = logo_annotations(&logo_record(&crop, Some(seen)), None);
             assert_eq!(ann.circles.len(), 2);
             for c in &ann.circles {

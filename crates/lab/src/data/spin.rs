@@ -12,10 +12,10 @@
 //! All three drop the paper's start outliers first and use the same noise
 //! level ([`REAL_NOISE`]).
 
-use topspin_core::fit::outlier::StartFilter;
-use topspin_core::fit::poly::Cubic;
-use topspin_core::fit::refine::{RefineConfig, refine};
+use topspin_core::fit::Cubic;
+use topspin_core::fit::StartFilter;
 use topspin_core::fit::{FitConfig, Method, Sample, fit_trajectory};
+use topspin_core::fit::{RefineConfig, refine};
 use topspin_core::physics::{BallState, FlightScales, FlightVariation, PhysicsParams, Propagator, Table, Vec3};
 
 use super::eval::{Prediction, Predictor};
@@ -98,7 +98,7 @@ impl FitPredictor {
         let rejected = filter.outliers(samples);
         let clean: Vec<Sample> =
             samples.iter().enumerate().filter(|(i, _)| !rejected.contains(i)).map(|(_, s)| *s).collect();
-        if clean.len() < topspin_core::fit::trajectory::MIN_SAMPLES {
+        if clean.len() < topspin_core::fit::MIN_SAMPLES {
             return None;
         }
         let cubic = Cubic::fit(clean.iter())?;

@@ -6,8 +6,8 @@
 use serde::Serialize;
 
 use topspin_core::calib::Calibration;
-use topspin_core::estimator::session::LearnConfig;
-use topspin_core::estimator::spin_prior::SPIN_BINS;
+use topspin_core::estimator::LearnConfig;
+use topspin_core::estimator::SPIN_BINS;
 use topspin_core::estimator::{Estimator, EstimatorConfig, SpinSource};
 use topspin_core::fit::{FitConfig, Method, Sample, fit_trajectory};
 use topspin_core::physics::Vec3;

@@ -10,10 +10,10 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use topspin_core::calib::Calibration;
-use topspin_core::calib::camera::CameraCalib;
-use topspin_core::logo::detect::DetectorConfig;
-use topspin_core::logo::pipeline::{CropInput, LogoMethod, process_sequence};
-use topspin_core::logo::rotation::{LogoSample, RotationFitConfig, fit_rotation};
+use topspin_core::calib::CameraCalib;
+use topspin_core::logo::DetectorConfig;
+use topspin_core::logo::{CropInput, LogoMethod, process_sequence};
+use topspin_core::logo::{LogoSample, RotationFitConfig, fit_rotation};
 use topspin_core::physics::{Vec3, rad_to_rps};
 use topspin_core::stats::Summary;
 use topspin_sim::render::{BallColour, MIN_FILMED_FRAMES, Scene, SequenceOptions, render_sequence};

@@ -5,9 +5,9 @@
 
 use std::net::{IpAddr, SocketAddr};
 
-use topspin_core::rsi::codec::RobElement;
-use topspin_core::rsi::session::Correction;
-use topspin_core::rsi::xml::{Scanner, Token, XmlError, attr, trim};
+use topspin_core::rsi::Correction;
+use topspin_core::rsi::RobElement;
+use topspin_core::rsi::{Scanner, Token, XmlError, attr, trim};
 
 /// `rsi/topspin_ethernet.xml`, compiled in.
 pub const DEFAULT_ETHERNET_XML: &str = include_str!("../../../../rsi/topspin_ethernet.xml");
@@ -268,7 +268,7 @@ impl ContextConfig {
         if !seen_ethernet {
             return Err(RsiFileError::Missing { file: F, what: "ETHERNET object" });
         }
-        if c.precision > topspin_core::rsi::codec::MAX_PRECISION || c.timeout == 0 {
+        if c.precision > topspin_core::rsi::MAX_PRECISION || c.timeout == 0 {
             return Err(RsiFileError::Bad { file: F, what: "Precision/Timeout" });
         }
         if (0..6).any(|i| c.axis_lower_deg[i] > 0.0 || c.axis_upper_deg[i] < 0.0) {

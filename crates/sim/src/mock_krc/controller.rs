@@ -49,8 +49,8 @@ use std::fmt;
 
 use topspin_core::geometry::unwrap_near;
 use topspin_core::kinematics::{AXES, Arm, Axis, Joints, LimitKind, LimitViolation, Pose, Unreachable};
-use topspin_core::rsi::codec::{CodecError, KukaPose, RobElement, RobFrame, SenFrame};
-use topspin_core::rsi::session::Correction;
+use topspin_core::rsi::Correction;
+use topspin_core::rsi::{CodecError, KukaPose, RobElement, RobFrame, SenFrame};
 use topspin_core::time::Instant;
 
 /// The longest dead time the mock models, cycles.
@@ -299,7 +299,7 @@ impl MockController {
             .unwrap_or(cfg.start_joints);
         let line = VecDeque::from(vec![q0; cfg.dead_time_cycles as usize]);
         let dt = cfg.cycle_ms as f64 * 1e-3;
-        let lag_step = topspin_core::calib::robot::lag_step(dt, cfg.lag_s);
+        let lag_step = topspin_core::calib::lag_step(dt, cfg.lag_s);
         MockController {
             ipoc: cfg.first_ipoc,
             correction: [0.0; 6],

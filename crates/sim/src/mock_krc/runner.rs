@@ -14,7 +14,7 @@ use super::config::{ContextConfig, EthernetConfig, RsiFileError};
 use super::controller::{ControllerConfig, CorrMode, MockController, PathSample, StopReason, Verdict};
 use super::faults::{FaultInjector, Faults, Link, MAX_DATAGRAM, UdpLink};
 use topspin_core::calib::RobotFile;
-use topspin_core::rsi::session::Correction;
+use topspin_core::rsi::Correction;
 use topspin_core::time::{Duration, Instant};
 use topspin_daemon::clock::{self, SPIN_BEFORE_DEADLINE};
 use topspin_daemon::runtime::daemon::ThreadSpec;

@@ -5,7 +5,7 @@ use std::path::PathBuf;
 
 use topspin_cnn::{Backend, CnnOutput, INPUT_SIZE, LogoCnn, default_model};
 use topspin_core::calib::Calibration;
-use topspin_core::calib::camera::CameraCalib;
+use topspin_core::calib::CameraCalib;
 use topspin_sim::render::{BallColour, Scene, SequenceOptions, render_sequence};
 use topspin_sim::{Setting, TrackerModel, simulate_ball};
 

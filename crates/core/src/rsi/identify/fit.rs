@@ -2,9 +2,9 @@
 //! corrections the controller applied and the `RIst` it reported.
 //!
 //! The model, per excited axis, on the IPOC timeline (one index per
-//! cycle): x[n+1] = a·x[n] + (1 − a)·u[n − d], a = exp(−T/τ), x[0] = 0 (at
-//! rest at the start pose, u = 0 before the start), and RIst[n] − start =
-//! g·x[n] + c + noise. u[n] is the correction the controller applied in
+//! cycle): x[n+1] = a·x\[n\] + (1 − a)·u[n − d], a = exp(−T/τ), x\[0\] = 0 (at
+//! rest at the start pose, u = 0 before the start), and RIst\[n\] − start =
+//! g·x\[n\] + c + noise. u\[n\] is the correction the controller applied in
 //! cycle n (the answer to request n, or the previous one where that answer
 //! was late). With d = 0 and τ = 0 the pose answered for request n is the
 //! RIst of request n + 1: that one-cycle pipeline is in the model's

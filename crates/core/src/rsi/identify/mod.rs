@@ -4,7 +4,7 @@
 //!
 //! - [`excitation`]: the correction per cycle index (a few mm, one axis at
 //!   a time, bounded speed and acceleration, zero at both ends).
-//! - [`fit`]: the model x[n+1] = a·x[n] + (1 − a)·u[n − d] fitted by
+//! - [`fit`]: the model x[n+1] = a·x\[n\] + (1 − a)·u[n − d] fitted by
 //!   output-error least squares for each dead time d, τ = −T / ln a.
 //! - [`Identifier`] (here): the protocol side, built like
 //!   [`crate::rsi::session::RsiSession`]: one

@@ -1,7 +1,7 @@
 //! Table III of the paper: the bounce-point error per launcher setting with
 //! the fitted spin and without spin. The paper's "without spin" is a Kalman
 //! filter on position and velocity; ours is the same: the EKF of
-//! [`topspin_core::estimator::ekf`] with the spin state pinned at zero (no prior
+//! [`topspin_core::estimator::Ekf`] with the spin state pinned at zero (no prior
 //! variance, no random walk), fed every observation before the net.
 //!
 //! Each simulated ball is predicted from its observations before the net
@@ -15,7 +15,7 @@ use super::{PaperConfig, Progress, ball_index};
 use crate::data::eval::{Prediction, Predictor, predicted_bounce};
 use crate::data::spin::FitPredictor;
 use topspin_core::calib::Calibration;
-use topspin_core::estimator::ekf::{Ekf, EkfNoise};
+use topspin_core::estimator::{Ekf, EkfNoise};
 use topspin_core::physics::{BallState, Propagator, Vec3};
 use topspin_core::stats::Summary;
 use topspin_sim::{Setting, SimBall, simulate_ball};

@@ -16,9 +16,9 @@ use plotters::prelude::*;
 
 use super::flights::{Flight, SpinMethod};
 use super::report::LatencyRun;
-use topspin_core::fit::poly::Cubic;
+use topspin_core::fit::Cubic;
 use topspin_core::fit::{FitConfig, Method, Sample, fit_trajectory};
-use topspin_core::logo::rotation::RotationFit;
+use topspin_core::logo::RotationFit;
 use topspin_core::physics::{FlightModel, Propagator, Vec3, rad_to_rps};
 use topspin_sim::{SimBall, true_state_at};
 

@@ -1,13 +1,13 @@
 //! The product's CNN and fusion as the paper run's extensions: the
 //! network of [`topspin_cnn`] as a [`CropPredictor`], and the
-//! daemon's logo + trajectory fusion ([`topspin_core::logo::fusion`], the EKF's
+//! daemon's logo + trajectory fusion ([`topspin_core::logo::fuse`], the EKF's
 //! spin update in batch form) as a [`SpinFusion`].
 
 use super::flights::{CropPrediction, CropPredictor, FusionInput, SpinFusion, SpinMethod};
 use topspin_cnn::{CnnOutput, INPUT_SIZE, LogoCnn, VISIBLE_THRESHOLD};
-use topspin_core::logo::detect::CropImage;
-use topspin_core::logo::fusion::{Fused, SpinEstimate, fuse};
-use topspin_core::logo::view::BallView;
+use topspin_core::logo::BallView;
+use topspin_core::logo::CropImage;
+use topspin_core::logo::{Fused, SpinEstimate, fuse};
 use topspin_core::physics::Vec3;
 
 /// The logo CNN, one crop per call (the per-crop time is what the table
