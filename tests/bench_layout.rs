@@ -10,7 +10,7 @@ use std::process::Command;
 
 use topspin_core::calib::Calibration;
 use topspin_core::time::Duration;
-use topspin_daemon::runtime::daemon::ThreadSpec;
+use topspin_daemon::runtime::ThreadSpec;
 use topspin_daemon::runtime::rt::{self, RtRefused, RtWarning};
 use topspin_sim::demo::{DemoConfig, run_loopback};
 

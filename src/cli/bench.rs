@@ -18,7 +18,7 @@ use super::bench_layout::{self, HELPER_PRIORITY, Layout, Placement};
 use topspin_core::calib::Calibration;
 use topspin_daemon::rsi_floor::FloorServer;
 use topspin_daemon::rsi_server::WaitStrategy;
-use topspin_daemon::runtime::daemon::ThreadSpec;
+use topspin_daemon::runtime::ThreadSpec;
 use topspin_daemon::runtime::rt::{self, RtRefused, RtWarning};
 use topspin_sim::demo::{DemoConfig, Latencies, run_loopback};
 use topspin_sim::mock_krc::{self, MockKrcConfig};
@@ -135,7 +135,7 @@ impl FloorLatency {
     }
 
     /// `l` (µs) over the floor, per quantile.
-    fn ratios(&self, l: &topspin_daemon::runtime::telemetry::Latency) -> serde_json::Value {
+    fn ratios(&self, l: &topspin_daemon::runtime::Latency) -> serde_json::Value {
         let r = |x: u64, f: f64| if f > 0.0 { (x as f64 / f * 100.0).round() / 100.0 } else { f64::NAN };
         json!({ "p50": r(l.p50, self.p50), "p99": r(l.p99, self.p99), "p999": r(l.p999, self.p999) })
     }

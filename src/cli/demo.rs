@@ -107,22 +107,20 @@ pub fn run(a: DemoArgs) -> anyhow::Result<()> {
         ),
         None => None,
     };
-    let mut runtime = topspin_daemon::runtime::daemon::RuntimeConfig::loopback();
+    let mut runtime = topspin_daemon::runtime::RuntimeConfig::loopback();
     runtime.servo_compensation = !a.no_lag_comp;
     runtime.correction = a.correction;
     if let Some(method) = a.logo {
-        runtime.logo = Some(topspin_daemon::runtime::daemon::LogoRuntime {
+        runtime.logo = Some(topspin_daemon::runtime::LogoRuntime {
             bind: "127.0.0.1:0".parse().expect("literal"),
             source: Some([127, 0, 0, 1].into()),
             method: match method {
-                topspin_daemon::config::LogoMethodConfig::Cnn => {
-                    topspin_daemon::runtime::daemon::LogoMethodChoice::Cnn {
-                        model: a.cnn.model_path(),
-                        backend: a.cnn.backend.clone(),
-                    }
-                }
+                topspin_daemon::config::LogoMethodConfig::Cnn => topspin_daemon::runtime::LogoMethodChoice::Cnn {
+                    model: a.cnn.model_path(),
+                    backend: a.cnn.backend.clone(),
+                },
                 topspin_daemon::config::LogoMethodConfig::Background => {
-                    topspin_daemon::runtime::daemon::LogoMethodChoice::Background
+                    topspin_daemon::runtime::LogoMethodChoice::Background
                 }
             },
             camera: topspin_core::calib::CameraCalib::default_camera(),

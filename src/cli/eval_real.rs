@@ -12,11 +12,11 @@ use serde_json::json;
 use super::BadInput;
 use super::fit::{PhysicsChoice, load_calibration};
 use topspin_core::physics::PhysicsParams;
-use topspin_lab::data::eval::prepare;
-use topspin_lab::data::frame::MPI_LAB_TO_TABLE;
-use topspin_lab::data::mpi::{DATA_ENV, load, locate};
-use topspin_lab::data::spin::SpinFit;
-use topspin_lab::data::study::{
+use topspin_lab::data::MPI_LAB_TO_TABLE;
+use topspin_lab::data::SpinFit;
+use topspin_lab::data::prepare;
+use topspin_lab::data::{DATA_ENV, load, locate};
+use topspin_lab::data::{
     LiftChoice, PREDICTORS, Variant, Which, calibrate_lift, calibration_markdown, compare, markdown, params_json,
     rows_json, spin_markdown, spin_summary,
 };

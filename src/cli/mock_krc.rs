@@ -12,7 +12,7 @@ use super::BadInput;
 use topspin_core::calib::Calibration;
 use topspin_core::rsi::Correction;
 use topspin_core::time::Duration;
-use topspin_sim::mock_krc::config::{ContextConfig, EthernetConfig, rsi_files};
+use topspin_sim::mock_krc::{ContextConfig, EthernetConfig, rsi_files};
 use topspin_sim::mock_krc::{CorrMode, Faults, MockKrcConfig};
 
 #[derive(Debug, Args)]

@@ -8,8 +8,8 @@ use std::path::PathBuf;
 use clap::Args;
 
 use super::BadInput;
-use topspin_daemon::record::{read_recording, replay::replay_recording};
-use topspin_daemon::viewer::replay::view_recording;
+use topspin_daemon::record::{read_recording, replay_recording};
+use topspin_daemon::viewer::view_recording;
 use topspin_daemon::viewer::{LiveServer, ViewerSink};
 
 #[derive(Debug, Args)]

@@ -18,11 +18,11 @@ use topspin_core::calib::Calibration;
 use topspin_core::calib::CameraCalib;
 use topspin_core::time::Duration;
 use topspin_daemon::config::{DaemonConfig, LogoMethodConfig, RsiWait};
-use topspin_daemon::record::sink::RecordingSink;
+use topspin_daemon::record::RecordingSink;
 use topspin_daemon::record::{Recorder, calib_files};
 use topspin_daemon::rsi_server::WaitStrategy;
-use topspin_daemon::runtime::daemon::{Daemon, LogoMethodChoice, LogoRuntime, RuntimeConfig, ThreadSpec};
-use topspin_daemon::runtime::telemetry::TelemetrySink;
+use topspin_daemon::runtime::TelemetrySink;
+use topspin_daemon::runtime::{Daemon, LogoMethodChoice, LogoRuntime, RuntimeConfig, ThreadSpec};
 use topspin_daemon::systemd::Notifier;
 use topspin_daemon::viewer::{LiveServer, ViewerSink};
 

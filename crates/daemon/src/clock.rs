@@ -97,7 +97,7 @@ pub fn sleep_until_in_kernel(deadline: Instant) -> Duration {
     Duration(monotonic_ns().saturating_sub(target))
 }
 
-/// Unix time now, ns (the monotonic clock plus [`unix_offset_ns`]).
+/// Unix time now, ns (the monotonic clock plus `unix_offset_ns`).
 pub fn unix_now_ns() -> u64 {
     now().as_nanos().saturating_add(unix_offset_ns())
 }

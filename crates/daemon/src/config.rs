@@ -420,7 +420,7 @@ impl Default for DaemonConfig {
 pub(crate) const LOG_LEVELS: [&str; 5] = ["error", "warn", "info", "debug", "trace"];
 
 impl DaemonConfig {
-    /// The effective configuration: defaults < [`SYSTEM_CONFIG_PATH`] (if
+    /// The effective configuration: defaults < `SYSTEM_CONFIG_PATH` (if
     /// present) < `file` < the process environment.
     pub fn load(file: Option<&Path>) -> Result<DaemonConfig, ConfigError> {
         Self::load_layers(Some(Path::new(SYSTEM_CONFIG_PATH)), file, std::env::vars())

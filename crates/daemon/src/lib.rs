@@ -20,6 +20,13 @@
 //! - [`doctor`]: is this PC ready for the 4 ms loop (`topspin doctor`).
 //! - [`touch`]: the RSI listener that reads touch points (`topspin calibrate cell --rsi`).
 //!
+//! Where to start: [`config::DaemonConfig`] (the layered configuration),
+//! then [`runtime::Daemon`], which starts the threads from it and returns
+//! a [`runtime::DaemonSummary`] when it stops. [`record::read_recording`]
+//! and [`record::replay_recording`] read and re-run a recorded session.
+//! Each area exports its items flat; the files inside an area are private
+//! (only `runtime::rt` and the `doctor` checks keep a module of their own).
+//!
 //! `DESIGN §n` in these docs cites section n of `docs/design.md`.
 
 #![warn(missing_docs)]

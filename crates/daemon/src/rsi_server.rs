@@ -24,7 +24,7 @@ pub(crate) const STOP_POLL: std::time::Duration = std::time::Duration::from_mill
 /// How the loop waits for the next datagram.
 #[derive(Copy, Clone, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum WaitStrategy {
-    /// A blocking receive with a timeout of [`STOP_POLL`].
+    /// A blocking receive with a timeout of `STOP_POLL`.
     Blocking,
     /// Spin on a non-blocking socket.
     BusyPoll,

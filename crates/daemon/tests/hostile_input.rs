@@ -15,7 +15,7 @@ use topspin_core::time::Instant;
 use topspin_core::wire::{OBSERVATION_LEN, Observation};
 use topspin_daemon::config::DaemonConfig;
 use topspin_daemon::rsi_server::{MAX_REQUEST_LEN, RsiServer, WaitStrategy, plan_slot};
-use topspin_daemon::runtime::daemon::{Daemon, RuntimeConfig};
+use topspin_daemon::runtime::{Daemon, RuntimeConfig};
 
 fn observation(seq: u32) -> [u8; OBSERVATION_LEN] {
     let mut buf = [0u8; OBSERVATION_LEN];

@@ -15,7 +15,7 @@ use std::time::{Duration, Instant};
 
 use topspin_core::calib::Calibration;
 use topspin_core::wire::Observation;
-use topspin_daemon::runtime::daemon::{Daemon, RuntimeConfig};
+use topspin_daemon::runtime::{Daemon, RuntimeConfig};
 
 const COUNT: u64 = 120;
 

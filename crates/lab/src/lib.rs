@@ -9,6 +9,12 @@
 //! - [`logo`]: logo spin against ground truth, and the sources compared.
 //! - [`progress`]: progress bars and the worker pool of long runs.
 //!
+//! Where to start: [`eval::stream::evaluate`] (the streaming estimator
+//! over a session of simulated balls), [`eval::worlds`] (the batch fit in
+//! worlds unlike ours) and [`eval::paper`] (the paper's tables and
+//! figures). Each `eval` and `logo` module is one command of
+//! `topspin eval` or `topspin logo`.
+//!
 //! `DESIGN §n` in these docs cites section n of `docs/design.md`.
 
 #![warn(missing_docs)]

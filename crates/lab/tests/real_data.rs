@@ -9,10 +9,10 @@
 use std::path::Path;
 
 use topspin_core::physics::{PhysicsParams, Propagator, Table};
-use topspin_lab::data::calibrate::{CalibrationSetup, calibrate, split_even_odd};
-use topspin_lab::data::eval::{CubicBaseline, EvalConfig, evaluate, prepare};
-use topspin_lab::data::frame::{BALL_RADIUS, BounceSearch, MPI_LAB_TO_TABLE, detect_bounces, estimate_frame};
-use topspin_lab::data::mpi::{RealTrajectory, SETS, load, locate, sampling_stats};
+use topspin_lab::data::{BALL_RADIUS, BounceSearch, MPI_LAB_TO_TABLE, detect_bounces, estimate_frame};
+use topspin_lab::data::{CalibrationSetup, calibrate, split_even_odd};
+use topspin_lab::data::{CubicBaseline, EvalConfig, evaluate, prepare};
+use topspin_lab::data::{RealTrajectory, SETS, load, locate, sampling_stats};
 
 fn data() -> Option<Vec<RealTrajectory>> {
     let Some(dir) = locate(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")) else {
@@ -147,8 +147,8 @@ fn calibration_of_drag_and_bounce_does_not_hurt_validation() {
 #[test]
 #[ignore = "prints the report for docs/real-data.md"]
 fn report_for_the_docs() {
-    use topspin_lab::data::calibrate::{CalibParam, Objective};
-    use topspin_lab::data::frame::LabToTable;
+    use topspin_lab::data::LabToTable;
+    use topspin_lab::data::{CalibParam, Objective};
     let Some(trajs) = data() else { return };
     let prepared = prepare(&trajs, &MPI_LAB_TO_TABLE);
     for horizon in [0.2, 0.3] {
@@ -184,12 +184,8 @@ fn report_for_the_docs() {
             r.train,
             r.validation
         );
-        let all = topspin_lab::data::calibrate::evaluate_with(
-            &prepared,
-            &|_: &PhysicsParams| CubicBaseline,
-            &paper_cfg(),
-            &r.params,
-        );
+        let all =
+            topspin_lab::data::evaluate_with(&prepared, &|_: &PhysicsParams| CubicBaseline, &paper_cfg(), &r.params);
         println!("all sets with these constants:\n{all}");
     }
     // Drag alone.
@@ -208,8 +204,8 @@ fn report_for_the_docs() {
 #[test]
 fn fitted_spin_beats_no_spin_on_the_spin_sets() {
     use topspin_core::calib::Calibration;
-    use topspin_lab::data::spin::FitPredictor;
-    use topspin_lab::data::study::eval_config;
+    use topspin_lab::data::FitPredictor;
+    use topspin_lab::data::eval_config;
     let Some(trajs) = data() else { return };
     let prepared = prepare(&trajs, &MPI_LAB_TO_TABLE);
     let p = Calibration::default_cell().physics;
@@ -219,7 +215,7 @@ fn fitted_spin_beats_no_spin_on_the_spin_sets() {
     let cubic = evaluate(&prepared, &CubicBaseline, &cfg);
     println!("refined fit:\n{spin}refined, spin 0:\n{no_spin}cubic, spin 0:\n{cubic}");
     for set in ["backspin", "topspin"] {
-        let g = |r: &topspin_lab::data::eval::Report| r.sets.iter().find(|g| g.name == set).unwrap().clone();
+        let g = |r: &topspin_lab::data::Report| r.sets.iter().find(|g| g.name == set).unwrap().clone();
         let (s, n, c) = (g(&spin), g(&no_spin), g(&cubic));
         assert!(s.bounce.count >= 3 && s.ahead.count >= 10, "{set}: {s:?}");
         assert!(s.bounce.median < 0.75 * n.bounce.median, "{set}: spin {} vs no spin {}", s.bounce, n.bounce);
@@ -231,7 +227,7 @@ fn fitted_spin_beats_no_spin_on_the_spin_sets() {
     let wy = |set: &str| {
         let mut v: Vec<f64> =
             spin.results.iter().filter(|r| r.set == set).filter_map(|r| r.prediction.map(|p| p.state.spin.y)).collect();
-        topspin_lab::data::mpi::median(&mut v)
+        topspin_lab::data::median(&mut v)
     };
     assert!(wy("backspin") < -50.0 && wy("topspin") > 50.0, "{} {}", wy("backspin"), wy("topspin"));
     assert!(wy("robot_no_spin").abs() < 50.0, "{}", wy("robot_no_spin"));
@@ -243,7 +239,7 @@ fn fitted_spin_beats_no_spin_on_the_spin_sets() {
 /// the ignored test below).
 #[test]
 fn lift_calibration_smoke() {
-    use topspin_lab::data::study::{LiftChoice, calibrate_lift};
+    use topspin_lab::data::{LiftChoice, calibrate_lift};
     let Some(trajs) = data() else { return };
     let prepared: Vec<_> = prepare(&trajs, &MPI_LAB_TO_TABLE).into_iter().filter(|t| t.index < 4).collect();
     let r = calibrate_lift(&prepared, &PhysicsParams::paper(), LiftChoice::Saturating, 8);
@@ -259,7 +255,7 @@ fn lift_calibration_smoke() {
 #[test]
 #[ignore = "the full calibration; slow"]
 fn full_lift_calibration() {
-    use topspin_lab::data::study::{LiftChoice, calibrate_lift, calibration_markdown, objective};
+    use topspin_lab::data::{LiftChoice, calibrate_lift, calibration_markdown, objective};
     let Some(trajs) = data() else { return };
     let prepared = prepare(&trajs, &MPI_LAB_TO_TABLE);
     let (train, validation) = split_even_odd(&prepared);

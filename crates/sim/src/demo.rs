@@ -43,9 +43,9 @@ use topspin_core::stats::Summary;
 use topspin_core::time::{Duration, Instant};
 use topspin_core::wire::CROP_MAX_LEN;
 use topspin_daemon::clock;
-use topspin_daemon::runtime::daemon::{Daemon, DaemonSummary, LinkState, RuntimeConfig, ThreadSpec};
 use topspin_daemon::runtime::rt::RtWarning;
-pub use topspin_daemon::runtime::telemetry::{Latencies, Latency};
+use topspin_daemon::runtime::{Daemon, DaemonSummary, LinkState, RuntimeConfig, ThreadSpec};
+pub use topspin_daemon::runtime::{Latencies, Latency};
 
 pub use topspin_core::plan::{HIT_RADIUS, HIT_WINDOW};
 /// Time from the daemon's start to the first launch, s.
@@ -71,7 +71,7 @@ pub struct DemoConfig {
     /// Serve the live Foxglove view here (see [`topspin_daemon::viewer`]).
     pub live: Option<SocketAddr>,
     /// Before the first ball, wait up to this long for a live client (then
-    /// [`LIVE_SETTLE`] for its subscriptions).
+    /// `LIVE_SETTLE` for its subscriptions).
     pub live_wait: Duration,
     /// Record the session (MCAP, with the viewer's channels) to this file.
     pub record: Option<PathBuf>,
@@ -461,7 +461,7 @@ pub fn run_loopback(cfg: &DemoConfig, cal: &Calibration) -> std::io::Result<Loop
             .zip(&starts)
             .filter_map(|(b, &start)| {
                 let h = b.truth.hit.as_ref()?;
-                Some(topspin_daemon::viewer::sink::TrueHit {
+                Some(topspin_daemon::viewer::TrueHit {
                     ball: b.index,
                     t: capture_time(t0, start, h.t),
                     pos: Vec3::from(h.pos),
@@ -556,7 +556,7 @@ fn viewer_sink(
     rcfg: &mut RuntimeConfig,
     cal: &Calibration,
     truth: &topspin_daemon::viewer::DemoTruth,
-) -> std::io::Result<Option<Box<dyn topspin_daemon::runtime::telemetry::TelemetrySink>>> {
+) -> std::io::Result<Option<Box<dyn topspin_daemon::runtime::TelemetrySink>>> {
     if cfg.live.is_none() && cfg.record.is_none() {
         return Ok(None);
     }
@@ -584,7 +584,7 @@ fn viewer_sink(
             let files = topspin_daemon::record::calib_files(None).map_err(std::io::Error::other)?;
             let rec = topspin_daemon::record::Recorder::create(path, &demo_daemon_config(cfg), &files)
                 .map_err(std::io::Error::other)?;
-            Some(topspin_daemon::record::sink::RecordingSink::new(rec))
+            Some(topspin_daemon::record::RecordingSink::new(rec))
         }
         None => None,
     };

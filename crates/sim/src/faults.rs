@@ -1,10 +1,10 @@
 //! A seeded fault injector around the simulated tracker's datagrams
 //! (smoltcp's `FaultInjector` pattern: the daemon has no fault `if`s, the
 //! stream is mistreated on its way in). The clean stream is planned first
-//! ([`plan_datagrams`]: every TTB1 datagram with its send time), then
-//! [`inject`] loses, silences, duplicates, reorders, teleports and
+//! (`plan_datagrams`: every TTB1 datagram with its send time), then
+//! `inject` loses, silences, duplicates, reorders, teleports and
 //! re-clocks it and mixes in garbage and a foreign "ball", and
-//! [`send_planned`] paces the result onto the sockets.
+//! `send_planned` paces the result onto the sockets.
 
 use std::io;
 use std::net::UdpSocket;
@@ -115,7 +115,7 @@ impl TrackerFaults {
     }
 }
 
-/// What [`inject`] did.
+/// What `inject` did.
 #[derive(Copy, Clone, Debug, Default, PartialEq, Eq, serde::Serialize)]
 pub struct InjectedCounts {
     /// Datagrams in the clean plan.

@@ -374,7 +374,7 @@ pub(crate) fn accepted(prop: &Propagator, s: &BallState, hit_plane_x: f64) -> bo
 
 /// Launches one ball of `setting`: draws speed, spin, launch point and a
 /// target bounce point, aims with `prop`, and redraws (at most
-/// [`MAX_ATTEMPTS`] times) until the ball clears the net, bounces on the
+/// `MAX_ATTEMPTS` times) until the ball clears the net, bounces on the
 /// robot's half and crosses `hit_plane_x`. Deterministic in `rng`.
 pub fn launch(
     setting: Setting,

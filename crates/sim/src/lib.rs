@@ -23,9 +23,15 @@
 //!   session, mock KR C4) on a virtual clock, judged the same way.
 //!
 //! Everything is driven by `ChaCha8Rng` seeded from one `u64`; ball k draws
-//! from its own streams ([`ball_rngs`]), so ball k is the same whatever the
+//! from its own streams (`ball_rngs`), so ball k is the same whatever the
 //! number of balls or the tracker options. No clock, no I/O: the command
 //! line writes files and paces the live stream.
+//!
+//! Where to start: [`simulate_ball`] (one seeded flight with its truth
+//! and observations), [`virtual_cell::run_virtual`] (the whole cell on a
+//! virtual clock, from a [`demo::DemoConfig`]), [`pair::Pair`] (an RSI
+//! session against the mock KR C4, cycle by cycle) and
+//! [`mock_krc::MockKrcConfig`] (the mock on a socket).
 //!
 //! `DESIGN §n` in these docs cites section n of `docs/design.md`.
 
@@ -164,7 +170,7 @@ pub fn simulate_ball(
 }
 
 /// Launch times of balls back to back: one every `gap` s, but never before
-/// the previous flight's end plus [`MIN_PAUSE`]. `ends[k]` is ball k's
+/// the previous flight's end plus `MIN_PAUSE`. `ends[k]` is ball k's
 /// flight end, s after its own launch.
 pub fn schedule(ends: &[f64], gap: f64) -> Vec<f64> {
     let mut out = Vec::with_capacity(ends.len());

@@ -1,7 +1,7 @@
 //! The mock KR C4 and the RSI session in one thread on a virtual clock,
 //! the way quinn-proto's tests drive a `Pair` of connections: no sockets,
 //! no threads, no sleeps. Each controller cycle is the same sequence the
-//! UDP runner ([`crate::mock_krc::runner`]) goes through on the wall clock — the
+//! UDP runner (`crate::mock_krc::runner`) goes through on the wall clock — the
 //! request leaves at the cycle's start, reaches the sensor after the
 //! link's latency, the session answers after its own processing time, the
 //! answer travels back and is offered to the controller if it arrives

@@ -6,12 +6,12 @@
 //! it (body frame: the logo's centre is +z), flying as the simulator flies
 //! it, seen by the pinhole camera of `calib/camera.toml` over a static table
 //! (blue surface with a value-noise texture, the white centre line, the net's
-//! tape). Each frame integrates [`SUBFRAMES`] samples per pixel spread over
+//! tape). Each frame integrates `SUBFRAMES` samples per pixel spread over
 //! the exposure (time-stratified, each at its own sub-pixel offset), so it
 //! carries the motion blur of the translation and of the rotation; shading is
 //! matt (Lambert under a ceiling light, hence the darker rim), the logo's
 //! printed edge is soft, and sensor noise (read + shot) is added after the
-//! gamma. The ball orientation is exp([ω]×·t)·R₀ with R₀ uniformly random and
+//! gamma. The ball orientation is exp(\[ω\]×·t)·R₀ with R₀ uniformly random and
 //! ω the pre-bounce spin. Seeded and deterministic: ball k of seed s is the
 //! same whatever else is rendered.
 //!

@@ -257,7 +257,7 @@ const MAX_DRAWS: usize = 64;
 
 /// Draws a human stroke of `strokes` that bounces on the robot's half with
 /// `prop`, counting the states passed over; `None` for the launcher or
-/// when [`MAX_DRAWS`] draws all miss (a world no human plays in).
+/// when `MAX_DRAWS` draws all miss (a world no human plays in).
 pub fn draw_human(strokes: Strokes, prop: &Propagator, rng: &mut impl Rng, redraws: &mut Redraws) -> Option<Launch> {
     let pool = strokes.pool();
     if pool.is_empty() {

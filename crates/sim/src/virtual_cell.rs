@@ -5,7 +5,7 @@
 //! mock KR C4 ([`Pair`]) — the same cores the daemon's threads own, in one
 //! thread, with no socket, sleep or clock read. Strokes are judged on the
 //! truth exactly as the loopback demo judges them
-//! ([`crate::demo::judge_strokes`]), so a run is a deterministic function
+//! (`crate::demo::judge_strokes`), so a run is a deterministic function
 //! of its configuration and seed.
 //!
 //! What it leaves out of the daemon: the threads' own processing time (the

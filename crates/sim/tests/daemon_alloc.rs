@@ -8,7 +8,7 @@ use std::cell::Cell;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 
 use topspin_core::calib::Calibration;
-use topspin_daemon::runtime::daemon::THREAD_START_HOOK;
+use topspin_daemon::runtime::THREAD_START_HOOK;
 use topspin_sim::demo::{DemoConfig, run};
 
 struct Counting;

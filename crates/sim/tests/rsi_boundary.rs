@@ -13,7 +13,7 @@ use topspin_core::rsi::KukaPose;
 use topspin_core::rsi::{ArmMode, RsiSession, SessionConfig, SessionEvent};
 use topspin_core::rsi::{LikelyFrame, StartRefused};
 use topspin_core::time::{Duration, Instant};
-use topspin_sim::mock_krc::controller::ControllerConfig;
+use topspin_sim::mock_krc::ControllerConfig;
 use topspin_sim::mock_krc::{Faults, MockKrcConfig, PathSample};
 use topspin_sim::pair::Pair;
 use topspin_sim::strikes::{StrikeMiss, strike_stream};

@@ -17,7 +17,7 @@ use topspin_core::calib::Calibration;
 use topspin_core::motion::MotionLimits;
 use topspin_core::rsi::{Correction, RsiSession, SessionConfig, SessionEvent};
 use topspin_core::time::{Duration, Instant};
-use topspin_sim::mock_krc::controller::ControllerConfig;
+use topspin_sim::mock_krc::ControllerConfig;
 use topspin_sim::mock_krc::{Faults, MockKrcConfig, MockResult, StopReason};
 use topspin_sim::pair::Pair;
 use topspin_sim::strikes::{StrikeMiss, strike_stream};

@@ -8,7 +8,7 @@
 use topspin_cnn as cnn;
 use topspin_core::calib::Calibration;
 use topspin_core::time::Duration;
-use topspin_daemon::runtime::daemon::{LogoMethodChoice, LogoRuntime};
+use topspin_daemon::runtime::{LogoMethodChoice, LogoRuntime};
 use topspin_sim::Strokes;
 use topspin_sim::demo::{DemoConfig, OutOfReach};
 use topspin_sim::faults::TrackerFaults;

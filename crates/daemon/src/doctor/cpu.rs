@@ -120,7 +120,7 @@ fn offline(host: &Host, name: &'static str, rsi: usize) -> Option<Check> {
 
 /// `cores`: every configured core is online (fail if not), this process may
 /// run on them, the RSI thread is pinned, and what shares its core.
-pub fn cores(host: &Host, cfg: &DaemonConfig) -> Check {
+pub(crate) fn cores(host: &Host, cfg: &DaemonConfig) -> Check {
     const NAME: &str = "cores";
     let online = match online(host) {
         Ok(s) => s,
@@ -202,7 +202,7 @@ pub fn cores(host: &Host, cfg: &DaemonConfig) -> Check {
 }
 
 /// `isolation`: the RSI core is kept free of other work (pass) or not (warn).
-pub fn isolation(host: &Host, cfg: &DaemonConfig) -> Check {
+pub(crate) fn isolation(host: &Host, cfg: &DaemonConfig) -> Check {
     const NAME: &str = "isolation";
     let Some(rsi) = cfg.threads.rsi_core.0 else {
         return Check::warn(
@@ -253,7 +253,7 @@ pub fn isolation(host: &Host, cfg: &DaemonConfig) -> Check {
 
 /// `smt`: the RSI core's hyper-threading siblings run nothing that could
 /// slow it (pass), or they do / could (warn).
-pub fn smt(host: &Host, cfg: &DaemonConfig) -> Check {
+pub(crate) fn smt(host: &Host, cfg: &DaemonConfig) -> Check {
     const NAME: &str = "smt";
     let Some(rsi) = cfg.threads.rsi_core.0 else {
         return Check::warn(
@@ -315,7 +315,7 @@ pub fn smt(host: &Host, cfg: &DaemonConfig) -> Check {
 
 /// `governor`: the hot cores run the `performance` frequency governor
 /// (pass), another one or none visible (warn).
-pub fn governor(host: &Host, cfg: &DaemonConfig) -> Check {
+pub(crate) fn governor(host: &Host, cfg: &DaemonConfig) -> Check {
     const NAME: &str = "governor";
     let mut cores: CpuSet = pinned(cfg).iter().filter(|p| p.hot).filter_map(|p| p.core).collect();
     if cores.is_empty() {

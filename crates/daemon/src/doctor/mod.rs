@@ -3,17 +3,17 @@
 //! `/proc` and `/sys` (never as root, never changing anything) and one
 //! measurement, the wake-up jitter of a thread on the RSI core.
 //!
-//! - [`sysfs`]: the root folder the files are read under (`/`, or a fake
+//! - `sysfs`: the root folder the files are read under (`/`, or a fake
 //!   tree in the tests) and the kernel's list formats.
-//! - [`host`]: that root plus the facts only a system call gives (limits,
+//! - `host`: that root plus the facts only a system call gives (limits,
 //!   interfaces, clock synchronisation).
-//! - [`cpu`]: the configured cores, their isolation, SMT siblings and
+//! - `cpu`: the configured cores, their isolation, SMT siblings and
 //!   frequency governor.
-//! - [`rt`]: the kernel's preemption model, the rights to SCHED_FIFO and
+//! - `rt`: the kernel's preemption model, the rights to SCHED_FIFO and
 //!   locked memory, RT throttling.
-//! - [`net`]: the configured addresses and the NIC that holds `rsi_bind`
+//! - `net`: the configured addresses and the NIC that holds `rsi_bind`
 //!   (link, IRQ affinity).
-//! - [`system`]: swap and time synchronisation.
+//! - `system`: swap and time synchronisation.
 //! - [`probe`]: the wake-up jitter probe on the RSI core.
 //!
 //! Each check is a plain function of a [`Host`] and the daemon's
@@ -26,21 +26,21 @@
 //! checked. Where a file cannot be read the check says `warn` and which
 //! file, never panics.
 
-pub mod cpu;
-pub mod host;
-pub mod net;
+pub(crate) mod cpu;
+pub(crate) mod host;
+pub(crate) mod net;
 pub mod probe;
 pub mod robot;
-pub mod rt;
-pub mod sysfs;
-pub mod system;
+pub(crate) mod rt;
+pub(crate) mod sysfs;
+pub(crate) mod system;
 
 use std::fmt::Write as _;
 
 use serde::Serialize;
 
-pub use host::Host;
-pub use sysfs::SysRoot;
+pub use host::{ClockSync, Host, Interface, Limit};
+pub use sysfs::{SysRoot, Unreadable};
 
 use crate::config::DaemonConfig;
 

@@ -24,7 +24,7 @@ const RSI_BIND_FIX: &str =
 /// `addresses`: each bind address is on an interface (fail if not: the
 /// daemon cannot bind it), no bind is the wildcard and each sender is on a
 /// directly connected network (warn if not).
-pub fn addresses(host: &Host, cfg: &DaemonConfig) -> Check {
+pub(crate) fn addresses(host: &Host, cfg: &DaemonConfig) -> Check {
     const NAME: &str = "addresses";
     let ifs = match &host.interfaces {
         Ok(v) => v,
@@ -130,7 +130,7 @@ fn irq_affinity(host: &Host, irq: u32) -> Option<CpuSet> {
 /// (the receive wakes it without crossing cores, ≈ 30 µs each way, DESIGN
 /// §10), away from it when it busy-polls (the spinning SCHED_FIFO thread
 /// would hold the receive work off).
-pub fn rsi_nic(host: &Host, cfg: &DaemonConfig) -> Check {
+pub(crate) fn rsi_nic(host: &Host, cfg: &DaemonConfig) -> Check {
     const NAME: &str = "rsi_nic";
     let bind = cfg.network.rsi_bind;
     let ip: IpAddr = bind.ip();

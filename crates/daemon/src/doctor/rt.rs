@@ -14,9 +14,9 @@ use super::{Check, Host};
 use crate::config::{DaemonConfig, RsiWait};
 
 /// `CAP_IPC_LOCK`'s bit in a capability mask (linux/capability.h).
-pub const CAP_IPC_LOCK: u32 = 14;
+pub(crate) const CAP_IPC_LOCK: u32 = 14;
 /// `CAP_SYS_NICE`'s bit.
-pub const CAP_SYS_NICE: u32 = 23;
+pub(crate) const CAP_SYS_NICE: u32 = 23;
 
 /// What the unit gives the service (the fix when this process lacks it).
 const SERVICE_RIGHTS: &str = "the service gets them from deploy/topspin.service (AmbientCapabilities=CAP_SYS_NICE CAP_IPC_LOCK, \
@@ -57,7 +57,7 @@ or build with CONFIG_PREEMPT_RT, in mainline since 6.12) and run the jitter prob
 
 /// `kernel`: PREEMPT_RT (pass) or any other preemption model (warn; the
 /// jitter probe says whether it is good enough).
-pub fn kernel(host: &Host) -> Check {
+pub(crate) fn kernel(host: &Host) -> Check {
     const NAME: &str = "kernel";
     let realtime = host.root.read_trim("/sys/kernel/realtime").ok();
     let version = host.root.read_trim("/proc/version");
@@ -89,7 +89,7 @@ pub fn kernel(host: &Host) -> Check {
 
 /// `rtprio`: this process may use SCHED_FIFO at the configured priorities
 /// (pass) or not (warn: the daemon then runs with normal scheduling).
-pub fn rtprio(host: &Host, cfg: &DaemonConfig) -> Check {
+pub(crate) fn rtprio(host: &Host, cfg: &DaemonConfig) -> Check {
     const NAME: &str = "rtprio";
     let t = &cfg.threads;
     if !t.realtime {
@@ -133,7 +133,7 @@ fn bytes(n: u64) -> String {
 
 /// `memlock`: this process may lock all its memory (pass) or not (warn:
 /// `mlockall` fails with ENOMEM and pages may be swapped or faulted).
-pub fn memlock(host: &Host, cfg: &DaemonConfig) -> Check {
+pub(crate) fn memlock(host: &Host, cfg: &DaemonConfig) -> Check {
     const NAME: &str = "memlock";
     if !cfg.threads.realtime {
         return Check::warn(
@@ -166,7 +166,7 @@ pub fn memlock(host: &Host, cfg: &DaemonConfig) -> Check {
 /// `rt_throttling`: SCHED_FIFO threads get CPU time (fail if the kernel
 /// gives them none) and the configured wait strategy stays clear of the
 /// throttle (warn when a busy-polling RSI thread can hit it).
-pub fn throttling(host: &Host, cfg: &DaemonConfig) -> Check {
+pub(crate) fn throttling(host: &Host, cfg: &DaemonConfig) -> Check {
     const NAME: &str = "rt_throttling";
     let read = |p: &str| -> Result<i64, String> {
         let t = host.root.read_trim(p).map_err(|e| e.to_string())?;

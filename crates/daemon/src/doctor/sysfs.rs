@@ -91,17 +91,17 @@ impl SysRoot {
 }
 
 /// The process ids in `/proc` (empty when it cannot be listed).
-pub fn pids(root: &SysRoot) -> Vec<u32> {
+pub(crate) fn pids(root: &SysRoot) -> Vec<u32> {
     root.list("/proc").map(|names| names.iter().filter_map(|n| n.parse().ok()).collect()).unwrap_or_default()
 }
 
 /// A set of CPU numbers.
-pub type CpuSet = BTreeSet<usize>;
+pub(crate) type CpuSet = BTreeSet<usize>;
 
 /// Parses a kernel CPU list (`0-3,5,8-9`, as in `/sys/devices/system/cpu/online`
 /// or `isolcpus=`); empty text, `(null)` (an empty `nohz_full`) and white
 /// space give the empty set. `None` for anything else.
-pub fn parse_cpu_list(text: &str) -> Option<CpuSet> {
+pub(crate) fn parse_cpu_list(text: &str) -> Option<CpuSet> {
     let text = text.trim();
     let mut set = CpuSet::new();
     if text.is_empty() || text == "(null)" {
@@ -135,7 +135,7 @@ pub fn parse_cpu_list(text: &str) -> Option<CpuSet> {
 }
 
 /// A CPU set the way the kernel writes it (`0-3,5`); `none` when empty.
-pub fn format_cpu_list(set: &CpuSet) -> String {
+pub(crate) fn format_cpu_list(set: &CpuSet) -> String {
     if set.is_empty() {
         return "none".to_owned();
     }
@@ -154,7 +154,7 @@ pub fn format_cpu_list(set: &CpuSet) -> String {
 
 /// The value of the last `key=value` on a kernel command line (the kernel
 /// takes the last), before a `--` (what follows goes to init).
-pub fn cmdline_param<'a>(cmdline: &'a str, key: &str) -> Option<&'a str> {
+pub(crate) fn cmdline_param<'a>(cmdline: &'a str, key: &str) -> Option<&'a str> {
     cmdline
         .split_whitespace()
         .take_while(|w| *w != "--")
@@ -166,14 +166,14 @@ pub fn cmdline_param<'a>(cmdline: &'a str, key: &str) -> Option<&'a str> {
 
 /// The CPUs of an `isolcpus=` value, which may start with flags
 /// (`isolcpus=nohz,domain,managed_irq,2-3`).
-pub fn isolcpus_cpus(value: &str) -> Option<CpuSet> {
+pub(crate) fn isolcpus_cpus(value: &str) -> Option<CpuSet> {
     let cpus: Vec<&str> =
         value.split(',').skip_while(|p| p.chars().next().is_some_and(|c| c.is_ascii_alphabetic())).collect();
     parse_cpu_list(&cpus.join(","))
 }
 
 /// One `Key:\tvalue` line of a `/proc/<pid>/status` file.
-pub fn status_field<'a>(status: &'a str, key: &str) -> Option<&'a str> {
+pub(crate) fn status_field<'a>(status: &'a str, key: &str) -> Option<&'a str> {
     status.lines().find_map(|l| l.strip_prefix(key).and_then(|r| r.strip_prefix(':')).map(str::trim))
 }
 

@@ -12,7 +12,7 @@ use crate::config::DaemonConfig;
 
 /// `swap`: no swap, or swap that cannot reach the daemon's locked memory
 /// (pass); swap and no right to lock memory (warn).
-pub fn swap(host: &Host, cfg: &DaemonConfig) -> Check {
+pub(crate) fn swap(host: &Host, cfg: &DaemonConfig) -> Check {
     const NAME: &str = "swap";
     let table = match host.root.read("/proc/swaps") {
         Ok(t) => t,
@@ -64,7 +64,7 @@ fn time_daemons(host: &Host) -> Vec<&'static str> {
 
 /// `time_sync`: the kernel clock is disciplined by a time daemon (pass),
 /// or not (yet) (warn).
-pub fn time_sync(host: &Host) -> Check {
+pub(crate) fn time_sync(host: &Host) -> Check {
     const NAME: &str = "time_sync";
     let daemons = time_daemons(host);
     let running = if daemons.is_empty() { String::new() } else { format!(" ({} running)", daemons.join(", ")) };

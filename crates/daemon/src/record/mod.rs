@@ -7,15 +7,15 @@
 //!
 //! An MCAP file (zstd chunks, single-threaded compression). First, before
 //! any message, the attachments `config.toml` (the effective
-//! [`DaemonConfig`] as TOML) and `calib/<file>.toml` (the calibration's
+//! \[`DaemonConfig`\] as TOML) and `calib/<file>.toml` (the calibration's
 //! TOML texts) and a metadata record `topspin` (version, clock), so a
 //! recording needs nothing else to be replayed. Then one channel per topic,
 //! JSON messages (`message_encoding = "json"`) each with a JSON Schema
 //! (`schema encoding = "jsonschema"`), log time = wall-clock ns since the
 //! Unix epoch (so Foxglove's timeline shows the date): the daemon's
 //! monotonic clock ([`crate::clock::now`]) plus the offset
-//! [`crate::clock::unix_offset_ns`] taken once at start, kept in the
-//! metadata as [`META_LOG_TIME_OFFSET`]. The `*_ns` fields inside the
+//! `crate::clock::unix_offset_ns` taken once at start, kept in the
+//! metadata as `META_LOG_TIME_OFFSET`. The `*_ns` fields inside the
 //! messages stay on the monotonic clock (what replay uses). Beside these, the
 //! session's channels ([`crate::channels`], Foxglove's protobuf schemas and
 //! JSON plots) with the same log times, so a recording opened in Foxglove
@@ -23,9 +23,9 @@
 //!
 //! | topic | log time | message |
 //! |---|---|---|
-//! | [`TOPIC_DATAGRAM`] | arrival | [`DatagramMsg`]: `arrival_ns`, `from` ("IP:PORT"), `hex` (the datagram's bytes, lower-case hex), `observation` (the decoded TTB1 fields, or null when it does not parse) |
-//! | [`TOPIC_PLAN`] | `made_at` | [`PlanMsg`]: every [`StrikePlan`] field (`*_ns` times; vectors as {x, y, z}; orientation {a, b, c}) and `f64_bits`, the 13 floats' IEEE bits as 16-digit hex strings in the order position xyz, velocity xyz, orientation abc, spin xyz, confidence — what replay compares |
-//! | [`TOPIC_RSI`] | arrival | [`RsiMsg`]: `arrival_ns`, `sent_ns`, `request` and `answer` (the XML text; `request_hex`/`answer_hex` instead when the bytes are not UTF-8) |
+//! | [`TOPIC_DATAGRAM`] | arrival | `DatagramMsg`: `arrival_ns`, `from` ("IP:PORT"), `hex` (the datagram's bytes, lower-case hex), `observation` (the decoded TTB1 fields, or null when it does not parse) |
+//! | [`TOPIC_PLAN`] | `made_at` | `PlanMsg`: every [`StrikePlan`] field (`*_ns` times; vectors as {x, y, z}; orientation {a, b, c}) and `f64_bits`, the 13 floats' IEEE bits as 16-digit hex strings in the order position xyz, velocity xyz, orientation abc, spin xyz, confidence — what replay compares |
+//! | [`TOPIC_RSI`] | arrival | `RsiMsg`: `arrival_ns`, `sent_ns`, `request` and `answer` (the XML text; `request_hex`/`answer_hex` instead when the bytes are not UTF-8) |
 //! | [`TOPIC_COUNTERS`] | `at` | the counters JSON object as the telemetry thread passes it |
 //!
 //! # Crash safety
@@ -35,7 +35,7 @@
 //! crash, a power cut) still reads back everything before that flush
 //! ([`read_recording`] stops at the first incomplete record and says so). The
 //! telemetry thread flushes about once a second; chunks also close by
-//! themselves at [`CHUNK_SIZE`].
+//! themselves at `CHUNK_SIZE`.
 //!
 //! # What replay needs from the daemon
 //!
@@ -53,8 +53,8 @@
 //! thread calls it.
 
 mod reader;
-pub mod replay;
-pub mod sink;
+pub(crate) mod replay;
+pub(crate) mod sink;
 mod writer;
 
 use serde::{Deserialize, Serialize};
@@ -66,6 +66,8 @@ use topspin_core::time::Instant;
 use topspin_core::wire::Observation;
 
 pub use reader::{RecordedDatagram, RecordedExchange, Recording, read_recording};
+pub use replay::{Difference, ReplayReport, replay_recording};
+pub use sink::RecordingSink;
 pub use writer::Recorder;
 
 /// Topic of the tracker datagrams.
@@ -130,7 +132,7 @@ const DEFAULT_CALIB: [&str; 4] = [
 ];
 
 /// The calibration texts [`CalibDir::load`](crate::calib_files::CalibDir::load) reads: each of
-/// [`CALIB_FILES`] from `dir`, or the compiled-in one where `dir` is `None`
+/// `CALIB_FILES` from `dir`, or the compiled-in one where `dir` is `None`
 /// or lacks it — the `calib_files` argument of [`Recorder::create`].
 pub fn calib_files(dir: Option<&std::path::Path>) -> Result<Vec<(String, String)>, RecordError> {
     let mut out = Vec::with_capacity(CALIB_FILES.len());
@@ -379,7 +381,7 @@ impl RsiMsg {
 pub mod schema {
     pub(crate) const DATAGRAM: &str = r#"{"$schema":"https://json-schema.org/draft/2020-12/schema","title":"topspin.TrackerDatagram","description":"One UDP datagram from the tracker (TTB1, DESIGN 5.1) as it arrived","type":"object","properties":{"arrival_ns":{"type":"integer","description":"arrival, daemon monotonic clock, ns"},"from":{"type":"string","description":"sender IP:PORT"},"hex":{"type":"string","description":"the datagram's bytes, lower-case hex"},"observation":{"description":"decoded TTB1 fields, null if the datagram does not parse","anyOf":[{"type":"null"},{"type":"object","properties":{"seq":{"type":"integer"},"capture_ns":{"type":"integer","description":"tracker clock"},"x":{"type":"number"},"y":{"type":"number"},"z":{"type":"number"},"residual":{"type":["number","null"]},"cameras":{"type":"integer"},"valid":{"type":"boolean"}}}]}},"required":["arrival_ns","from","hex","observation"]}"#;
     pub(crate) const PLAN: &str = r#"{"$schema":"https://json-schema.org/draft/2020-12/schema","title":"topspin.StrikePlan","description":"A strike plan the estimator published; table frame, SI units; a null number is NaN or infinite (exact values in f64_bits)","type":"object","properties":{"seq":{"type":"integer"},"trajectory":{"type":"integer"},"made_at_ns":{"type":"integer"},"hit_time_ns":{"type":"integer"},"lead_s":{"type":["number","null"]},"position":{"type":"object","properties":{"x":{"type":["number","null"]},"y":{"type":["number","null"]},"z":{"type":["number","null"]}},"required":["x","y","z"]},"velocity":{"type":"object","properties":{"x":{"type":["number","null"]},"y":{"type":["number","null"]},"z":{"type":["number","null"]}},"required":["x","y","z"]},"orientation":{"type":"object","properties":{"a":{"type":["number","null"]},"b":{"type":["number","null"]},"c":{"type":["number","null"]}},"required":["a","b","c"]},"spin":{"type":"object","properties":{"x":{"type":["number","null"]},"y":{"type":["number","null"]},"z":{"type":["number","null"]}},"required":["x","y","z"]},"confidence":{"type":["number","null"]},"f64_bits":{"type":"array","description":"IEEE bits of position xyz, velocity xyz, orientation abc, spin xyz, confidence (16 hex digits each)","items":{"type":"string"},"minItems":13,"maxItems":13}},"required":["seq","trajectory","made_at_ns","hit_time_ns","position","velocity","orientation","spin","confidence","f64_bits"]}"#;
-    /// The schema of [`TOPIC_RSI`]'s messages ([`RsiMsg`]).
+    /// The schema of \[`TOPIC_RSI`\]'s messages (\[`RsiMsg`\]).
     pub const RSI: &str = r#"{"$schema":"https://json-schema.org/draft/2020-12/schema","title":"topspin.RsiExchange","description":"One RSI exchange: the KR C4's datagram and our answer","type":"object","properties":{"arrival_ns":{"type":"integer"},"sent_ns":{"type":"integer"},"request":{"type":"string","description":"the controller's XML"},"request_hex":{"type":"string","description":"instead of request when not UTF-8"},"answer":{"type":"string","description":"our XML"},"answer_hex":{"type":"string","description":"instead of answer when not UTF-8"}},"required":["arrival_ns","sent_ns"]}"#;
     pub(crate) const COUNTERS: &str = r#"{"$schema":"https://json-schema.org/draft/2020-12/schema","title":"topspin.Counters","description":"The daemon's counters (ingest, estimator, rsi, rings), as the telemetry thread sends them","type":"object"}"#;
 }

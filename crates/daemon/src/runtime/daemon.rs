@@ -449,7 +449,7 @@ impl Daemon {
     }
 
     /// Waits for the drain — the bat home and the controller stopped
-    /// (silent), or no robot at all, or at most [`MAX_DRAIN`] — and for
+    /// (silent), or no robot at all, or at most `MAX_DRAIN` — and for
     /// every thread; returns what they saw.
     pub fn join(self) -> io::Result<DaemonSummary> {
         self.request_stop();

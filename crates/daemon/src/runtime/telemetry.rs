@@ -38,7 +38,7 @@ pub struct DatagramRecord {
     pub from: SocketAddr,
     /// Length on the wire (may exceed what is kept).
     pub len: u16,
-    /// Its first [`RECORDED_DATAGRAM`] bytes (see [`kept`](Self::kept)).
+    /// Its first `RECORDED_DATAGRAM` bytes (see [`kept`](Self::kept)).
     pub bytes: [u8; RECORDED_DATAGRAM],
     /// The sequence number if accepted, otherwise why it was dropped.
     pub outcome: Result<u32, Dropped>,
@@ -58,11 +58,11 @@ pub struct RsiRecord {
     pub arrival: Instant,
     /// When the answer was sent, on the daemon's clock.
     pub sent: Instant,
-    /// Bytes of `request` used (at most [`RECORDED_RSI`]).
+    /// Bytes of `request` used (at most `RECORDED_RSI`).
     pub request_len: u16,
     /// The request's first bytes.
     pub request: [u8; RECORDED_RSI],
-    /// Bytes of `answer` used (at most [`RECORDED_RSI`]).
+    /// Bytes of `answer` used (at most `RECORDED_RSI`).
     pub answer_len: u16,
     /// The answer's first bytes.
     pub answer: [u8; RECORDED_RSI],
@@ -123,9 +123,9 @@ pub struct LogoRecord {
     pub capture: Instant,
     /// The ball's trajectory number (0 from the logo thread, which does not know it).
     pub trajectory: u32,
-    /// Crop size, px (each at most [`LOGO_CROP_SIDE`]).
+    /// Crop size, px (each at most `LOGO_CROP_SIDE`).
     pub width: u16,
-    /// Crop height, px (at most [`LOGO_CROP_SIDE`]).
+    /// Crop height, px (at most `LOGO_CROP_SIDE`).
     pub height: u16,
     /// Row-major pixels, `rgb8` (3 bytes a pixel), `width * height * 3` used.
     pub pixels: [u8; 3 * LOGO_CROP_SIDE * LOGO_CROP_SIDE],
@@ -177,11 +177,11 @@ pub trait TelemetrySink: Send {
     fn event(&mut self, _e: &Telemetry) {}
     /// One logo crop (the viewer).
     fn logo(&mut self, _l: &LogoRecord) {}
-    /// The queue depths every [`QUEUE_INTERVAL_S`].
+    /// The queue depths every `QUEUE_INTERVAL_S`.
     fn queues(&mut self, _q: &QueueDepths, _at: Instant) {}
     /// Called at each log interval and at the end.
     fn counters(&mut self, _json: &serde_json::Value, _at: Instant) {}
-    /// Writes out what is buffered: about every [`FLUSH_INTERVAL_S`], after
+    /// Writes out what is buffered: about every `FLUSH_INTERVAL_S`, after
     /// each counters call, and at the end.
     fn flush(&mut self) {}
 }
@@ -314,7 +314,7 @@ impl TelemetrySummary {
 }
 
 /// Creates one ring of `capacity`: the hot end and the cold end.
-pub fn ring<T>(dropped: &Arc<AtomicU64>, capacity: usize) -> (TelemetryTx<T>, Consumer<T>) {
+pub(crate) fn ring<T>(dropped: &Arc<AtomicU64>, capacity: usize) -> (TelemetryTx<T>, Consumer<T>) {
     let (producer, consumer) = rtrb::RingBuffer::new(capacity);
     (TelemetryTx { producer, dropped: dropped.clone() }, consumer)
 }
@@ -325,7 +325,7 @@ fn us(from: Instant, to: Instant) -> u64 {
 
 /// What the telemetry thread drains and where it hands it.
 #[allow(missing_debug_implementations)] // holds a `dyn TelemetrySink`
-pub struct TelemetryInputs {
+pub(crate) struct TelemetryInputs {
     /// The hot threads' telemetry rings.
     pub rings: Vec<Consumer<Telemetry>>,
     /// RSI bytes, when recording.
@@ -340,7 +340,7 @@ pub struct TelemetryInputs {
 
 /// The telemetry thread's loop: drains the rings until `stop` (then once
 /// more), logging every `log_interval` s of the clock `now`.
-pub fn run(
+pub(crate) fn run(
     inputs: TelemetryInputs,
     stop: &AtomicBool,
     dropped: &AtomicU64,

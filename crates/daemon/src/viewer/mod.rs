@@ -1,12 +1,12 @@
 //! The viewer: what Foxglove shows of the robot thinking — a 3D scene in
 //! the table frame and time series — built on the telemetry thread from
 //! the events it already receives, and sent to a live Foxglove WebSocket
-//! server ([`live`]) and/or into the session recording (same channels, same
+//! server (`live`) and/or into the session recording (same channels, same
 //! log times, so a recording and a live run look the same).
 //!
 //! Cold path only: everything here allocates and encodes; the hot threads
 //! (ingest, estimator, RSI) only push their fixed-size `Copy` events into
-//! their rings ([`crate::runtime::telemetry`]) and never wait for a viewer.
+//! their rings (`crate::runtime::telemetry`) and never wait for a viewer.
 //!
 //! # Channels
 //!
@@ -16,17 +16,17 @@
 //!
 //! | topic | schema | what |
 //! |---|---|---|
-//! | `/view/cell` | `foxglove.SceneUpdate` | table, lines and net; robot base and workspace box (in `robot_base`); the hitting window (`hitting_window`: the hitting plane's, and the hitting volume's nearest plane's, fainter) — again every [`CELL_INTERVAL_S`] for clients that join later |
+//! | `/view/cell` | `foxglove.SceneUpdate` | table, lines and net; robot base and workspace box (in `robot_base`); the hitting window (`hitting_window`: the hitting plane's, and the hitting volume's nearest plane's, fainter) — again every `CELL_INTERVAL_S` for clients that join later |
 //! | `/tf` | `foxglove.FrameTransform` | `table` → `robot_base` |
-//! | `/view/ball` | `foxglove.SceneUpdate` | each observation (`obs/<n>`, [`OBS_LIFETIME_S`]; cyan tracked, grey not tracked, red rejected by the EKF gate), the EKF estimate (`ekf`), the predicted path through the bounce to the hitting plane (`prediction`, with the crossing `hit`) after every observation, the spin arrow with its magnitude (`spin`), the logo direction (`logo`); these five expire [`TRACK_LIFETIME_S`] after their last update |
-//! | `/view/robot` | `foxglove.SceneUpdate` | the planned bat (`bat_plan`: a disc at the hitting point, its velocity arrow); the arm from the forward kinematics of the actual joints (`arm_actual`, from `AIPos`: a cylinder per link, a sphere per joint and at the TCP, in `table`, metadata `ipoc`) and its ghost from the commanded joints (`arm_commanded`, from `ASPos`: translucent, ahead of the actual by the dead time and lag) (`viewer::arm`); the actual and commanded TCP (`tcp_actual`, `tcp_commanded`, bat discs in `robot_base`); the arm and TCP every [`TCP_DECIMATION`]th RSI cycle, expiring [`ROBOT_LIFETIME_S`] after their last update |
+//! | `/view/ball` | `foxglove.SceneUpdate` | each observation (`obs/<n>`, `OBS_LIFETIME_S`; cyan tracked, grey not tracked, red rejected by the EKF gate), the EKF estimate (`ekf`), the predicted path through the bounce to the hitting plane (`prediction`, with the crossing `hit`) after every observation, the spin arrow with its magnitude (`spin`), the logo direction (`logo`); these five expire `TRACK_LIFETIME_S` after their last update |
+//! | `/view/robot` | `foxglove.SceneUpdate` | the planned bat (`bat_plan`: a disc at the hitting point, its velocity arrow); the arm from the forward kinematics of the actual joints (`arm_actual`, from `AIPos`: a cylinder per link, a sphere per joint and at the TCP, in `table`, metadata `ipoc`) and its ghost from the commanded joints (`arm_commanded`, from `ASPos`: translucent, ahead of the actual by the dead time and lag) (`viewer::arm`); the actual and commanded TCP (`tcp_actual`, `tcp_commanded`, bat discs in `robot_base`); the arm and TCP every `TCP_DECIMATION`th RSI cycle, expiring `ROBOT_LIFETIME_S` after their last update |
 //! | `/view/plan_pose` | `foxglove.PoseInFrame` | the planned bat pose (`table`) |
-//! | `/view/tcp` | `foxglove.PosesInFrame` | `[actual, commanded]` TCP (`robot_base`), every [`TCP_DECIMATION`]th RSI cycle |
+//! | `/view/tcp` | `foxglove.PosesInFrame` | `[actual, commanded]` TCP (`robot_base`), every `TCP_DECIMATION`th RSI cycle |
 //! | `/view/verdict` | `foxglove.SceneUpdate` | the demo only: hit or miss per ball at its true hitting point |
 //! | `/plot/spin` | JSON | the EKF spin per observation: `trajectory`, `x_rps`, `y_rps`, `z_rps`, `norm_rps` |
 //! | `/plot/prediction_error` | JSON | when a ball ends, per plan: `time_to_hit_s`, `error_mm` (hitting point), `dt_ms` (hitting time) against `reference` (`truth` in the demo, else the ball's last plan) |
 //! | `/plot/rsi` | JSON | per RSI answer: `latency_us`, `controller_late` (the controller's count), `slow_answers`, `plans_late`, `plans_rejected` |
-//! | `/plot/queues` | JSON | [`QueueDepths`] every [`crate::runtime::telemetry::QUEUE_INTERVAL_S`] |
+//! | `/plot/queues` | JSON | [`QueueDepths`] every `crate::runtime::telemetry::QUEUE_INTERVAL_S` |
 //! | `/logo/crop` | `foxglove.RawImage` | the logo thread's crop (`rgb8`) |
 //! | `/logo/fit` | `foxglove.ImageAnnotations` | on the crop: the ball (circle) and the detected logo (filled dot) |
 //!
@@ -34,12 +34,12 @@
 //! [`LogoRecord`] into [`crate::runtime::daemon::Daemon::logo_tx`]; the
 //! telemetry thread hands it to [`ViewerSink::logo`](sink::ViewerSink).
 //!
-//! Log times are wall clock: the monotonic time + [`crate::clock::unix_offset_ns`].
+//! Log times are wall clock: the monotonic time + `crate::clock::unix_offset_ns`.
 
 pub(crate) mod arm;
-pub mod live;
-pub mod replay;
-pub mod sink;
+pub(crate) mod live;
+pub(crate) mod replay;
+pub(crate) mod sink;
 
 use foxglove::messages as fm;
 use nalgebra::{Rotation3, UnitQuaternion};
@@ -49,7 +49,8 @@ use topspin_core::geometry::rot_zyx;
 pub use crate::channels::{TOPICS, Topic};
 pub use crate::runtime::telemetry::{LogoRecord, QueueDepths};
 pub use live::LiveServer;
-pub use sink::{DemoTruth, ViewerSink};
+pub use replay::view_recording;
+pub use sink::{DemoTruth, TrueHit, ViewerSink};
 
 /// Where `--live` serves without an address (loopback, Foxglove's usual port).
 pub const DEFAULT_LIVE_ADDR: &str = "127.0.0.1:8765";

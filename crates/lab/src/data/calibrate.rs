@@ -102,7 +102,7 @@ impl CalibParam {
 
 /// What the search minimises (all in mm, pooled over the subset). A
 /// trajectory whose target exists but whose prediction has none counts
-/// [`MISSING_PENALTY_MM`], so the search cannot win by losing balls.
+/// `MISSING_PENALTY_MM`, so the search cannot win by losing balls.
 #[derive(Copy, Clone, Debug, PartialEq, Eq)]
 pub enum Objective {
     /// Median bounce error.

@@ -203,7 +203,7 @@ pub(crate) fn read_index(path: &Path) -> Result<Vec<IndexEntry>, MpiError> {
 }
 
 /// Reads one trajectory file (`t,x,y,z,...`), lab frame.
-pub fn read_samples(path: &Path) -> Result<Vec<(f64, Vec3)>, MpiError> {
+pub(crate) fn read_samples(path: &Path) -> Result<Vec<(f64, Vec3)>, MpiError> {
     let mut rdr = reader(path)?;
     let headers = rdr.headers().map_err(csv_err(path))?.clone();
     let cols = [

@@ -68,7 +68,7 @@ fn solve<const N: usize>(mut a: [[f64; N]; N], mut b: [f64; N]) -> Option<[f64; 
 }
 
 /// Σ c_k τ^k.
-pub fn eval<const N: usize>(c: &[f64; N], tau: f64) -> f64 {
+pub(crate) fn eval<const N: usize>(c: &[f64; N], tau: f64) -> f64 {
     c.iter().rev().fold(0.0, |acc, &ck| acc * tau + ck)
 }
 

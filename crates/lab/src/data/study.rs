@@ -82,7 +82,7 @@ pub struct Variant {
     pub params: PhysicsParams,
 }
 
-/// One predictor under one physics: a report per horizon in [`HORIZONS`].
+/// One predictor under one physics: a report per horizon in `HORIZONS`.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Row {
     /// The physics variant's name ([`Variant::name`]).
@@ -251,7 +251,7 @@ pub(crate) fn calibration_setup(base: &PhysicsParams, lift: LiftChoice, max_eval
     }
 }
 
-/// Runs [`calibration_setup`] with the refined fit, then restarts the
+/// Runs `calibration_setup` with the refined fit, then restarts the
 /// search once from its result (a fresh simplex: the objective is a sum of
 /// medians, piecewise smooth, and a first simplex can collapse early). The
 /// "before" values are those of the first start.

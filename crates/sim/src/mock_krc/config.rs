@@ -10,13 +10,13 @@ use topspin_core::rsi::RobElement;
 use topspin_core::rsi::{Scanner, Token, XmlError, attr, trim};
 
 /// `rsi/topspin_ethernet.xml`, compiled in.
-pub const DEFAULT_ETHERNET_XML: &str = include_str!("../../../../rsi/topspin_ethernet.xml");
+pub(crate) const DEFAULT_ETHERNET_XML: &str = include_str!("../../../../rsi/topspin_ethernet.xml");
 /// `rsi/topspin.rsi.xml`, compiled in.
-pub const DEFAULT_CONTEXT_XML: &str = include_str!("../../../../rsi/topspin.rsi.xml");
+pub(crate) const DEFAULT_CONTEXT_XML: &str = include_str!("../../../../rsi/topspin.rsi.xml");
 /// `rsi/topspin_axis_ethernet.xml`, compiled in.
-pub const AXIS_ETHERNET_XML: &str = include_str!("../../../../rsi/topspin_axis_ethernet.xml");
+pub(crate) const AXIS_ETHERNET_XML: &str = include_str!("../../../../rsi/topspin_axis_ethernet.xml");
 /// `rsi/topspin_axis.rsi.xml`, compiled in.
-pub const AXIS_CONTEXT_XML: &str = include_str!("../../../../rsi/topspin_axis.rsi.xml");
+pub(crate) const AXIS_CONTEXT_XML: &str = include_str!("../../../../rsi/topspin_axis.rsi.xml");
 
 /// The names of a correction's two files in `rsi/` (Ethernet, context)
 /// and their compiled-in texts.

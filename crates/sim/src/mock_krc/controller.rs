@@ -54,7 +54,7 @@ use topspin_core::rsi::{CodecError, KukaPose, RobElement, RobFrame, SenFrame};
 use topspin_core::time::Instant;
 
 /// The longest dead time the mock models, cycles.
-pub const MAX_DEAD_TIME_CYCLES: usize = 32;
+pub(crate) const MAX_DEAD_TIME_CYCLES: usize = 32;
 
 /// Brakes applied at a cycle for a number of cycles.
 #[derive(Copy, Clone, Debug, PartialEq, Eq)]
@@ -288,7 +288,7 @@ pub struct MockController {
 
 impl MockController {
     /// A controller at its start pose. Panics if the dead time exceeds
-    /// [`MAX_DEAD_TIME_CYCLES`] (configurations are checked before).
+    /// `MAX_DEAD_TIME_CYCLES` (configurations are checked before).
     pub fn new(cfg: ControllerConfig) -> Self {
         assert!((cfg.dead_time_cycles as usize) < MAX_DEAD_TIME_CYCLES, "dead time too long");
         // The joints of the start pose: the solution nearest `start_joints`

@@ -17,7 +17,7 @@ use topspin_core::calib::RobotFile;
 use topspin_core::rsi::Correction;
 use topspin_core::time::{Duration, Instant};
 use topspin_daemon::clock::{self, SPIN_BEFORE_DEADLINE};
-use topspin_daemon::runtime::daemon::ThreadSpec;
+use topspin_daemon::runtime::ThreadSpec;
 use topspin_daemon::runtime::rt::{self, RtWarning};
 
 /// How the mock runs.

@@ -1,14 +1,14 @@
 //! The paper's figures (and ours) as SVG strings, drawn with plotters'
 //! SVG backend (no font rendering needed): the caller writes them.
 //!
-//! - [`two_point_velocity`]: z and the two-point z-velocity against the
+//! - `two_point_velocity`: z and the two-point z-velocity against the
 //!   cubic fit (paper Fig. 6);
-//! - [`accelerations`]: gravity, drag and Magnus along a topspin flight,
+//! - `accelerations`: gravity, drag and Magnus along a topspin flight,
 //!   from the paper's fit and from the truth (Fig. 7);
-//! - [`logo_plane`]: the logo positions of one sequence with the fitted
+//! - `logo_plane`: the logo positions of one sequence with the fitted
 //!   rotation circle (Fig. 5);
 //! - [`predicted`]: predicted against true trajectories per spin type;
-//! - [`clusters`]: the spins per method, coloured by setting (Table IV);
+//! - `clusters`: the spins per method, coloured by setting (Table IV);
 //! - [`latency`]: the latency histograms of a short bench run.
 
 use plotters::coord::Shift;

@@ -14,7 +14,7 @@
 //!   fit as the background method, and fills [`SpinMethod::Cnn`] and the
 //!   network metrics.
 //! - [`SpinFusion`]: anything that turns one flight's fits (trajectory and
-//!   logo) into one spin; [`run_fusion`] fills [`SpinMethod::Fused`].
+//!   logo) into one spin; `run_fusion` fills [`SpinMethod::Fused`].
 //!
 //! Without them those rows say "no model".
 

@@ -14,7 +14,7 @@
 //! - [`real`]: bounce and 0.3 s-ahead error on the real recordings.
 //! - [`plug`]: the product's CNN and logo + trajectory fusion as those
 //!   extensions.
-//! - [`figures`]: the paper's figures (and ours) as SVG, with plotters.
+//! - [`figures`](mod@figures): the paper's figures (and ours) as SVG, with plotters.
 //! - [`report`]: the whole run as Markdown (`tables.md`) and JSON.
 //!
 //! What this module must not do: read a clock (the caller passes one for the

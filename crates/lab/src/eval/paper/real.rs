@@ -34,7 +34,7 @@ pub struct RealCell {
     pub with_spin: bool,
     /// Bounce xy: count, median, mean, std.
     pub bounce: [f64; 4],
-    /// 3D error at each of [`HORIZONS`]: count, median, mean, std.
+    /// 3D error at each of `HORIZONS`: count, median, mean, std.
     pub ahead: [[f64; 4]; 2],
 }
 
