@@ -13,8 +13,9 @@ use topspin_core::ingest::Ingest;
 use topspin_core::plan::StrikePlan;
 use topspin_core::time::Instant;
 use topspin_core::wire::{OBSERVATION_LEN, Observation};
+use topspin_daemon::calib_files::calibration_texts;
 use topspin_daemon::config::DaemonConfig;
-use topspin_daemon::record::{Recorder, calib_files, read_recording};
+use topspin_daemon::record::{Recorder, read_recording};
 use topspin_lab::eval::stream::{StreamSetup, simulate_stream};
 
 const TRACKER: &str = "127.0.0.7:5555";
@@ -32,7 +33,7 @@ fn record(path: &Path, balls: usize) -> Recorded {
     cfg.network.tracker_source = "127.0.0.7".parse().unwrap();
     cfg.tracker.noise_mm = 1.5;
     let (sim, launches) = simulate_stream(&cal, &StreamSetup { balls, seed: 7, noise_mm: 1.5, ..Default::default() });
-    let mut rec = Recorder::create(path, &cfg, &calib_files(None).unwrap()).unwrap();
+    let mut rec = Recorder::create(path, &cfg, &calibration_texts(None).unwrap()).unwrap();
     let mut ingest = Ingest::new(Some(cfg.network.tracker_source), cfg.fixed_latency_ns());
     let mut est = Estimator::new(&cal, cfg.estimator_config());
     let from: SocketAddr = TRACKER.parse().unwrap();
@@ -104,7 +105,7 @@ fn a_recording_reads_back_whole() {
     assert_eq!(s.observations.len(), rec.datagrams);
     assert_eq!(s.plans, rec.plans);
     assert_eq!(s.config.tracker.noise_mm, 1.5);
-    assert_eq!(s.calib_files, calib_files(None).unwrap());
+    assert_eq!(s.calib_files, calibration_texts(None).unwrap());
     assert_eq!(s.calibration().unwrap(), Calibration::default_cell());
     assert!(s.counters.len() > 5);
     let last = s.exchanges.last().unwrap();

@@ -6,15 +6,9 @@
 use std::path::Path;
 
 use libfuzzer_sys::fuzz_target;
-use topspin_core::calib::Calibration;
-use topspin_core::calib::CameraCalib;
+use topspin_core::calib::{CameraCalib, Calibration, DEFAULT_PHYSICS, DEFAULT_ROBOT, DEFAULT_STRIKE, DEFAULT_TABLE};
 
-const FILES: [&str; 4] = [
-    include_str!("../../calib/physics.toml"),
-    include_str!("../../calib/table.toml"),
-    include_str!("../../calib/strike.toml"),
-    include_str!("../../calib/robot.toml"),
-];
+const FILES: [&str; 4] = [DEFAULT_PHYSICS, DEFAULT_TABLE, DEFAULT_STRIKE, DEFAULT_ROBOT];
 
 fuzz_target!(|data: &[u8]| {
     let Some((&which, rest)) = data.split_first() else { return };

@@ -9,7 +9,7 @@
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
-use topspin_daemon::calib_files::CalibDir;
+use topspin_daemon::calib_files::{CalibDir, calibration_texts};
 
 use clap::Args;
 
@@ -18,8 +18,8 @@ use topspin_core::calib::Calibration;
 use topspin_core::calib::CameraCalib;
 use topspin_core::time::Duration;
 use topspin_daemon::config::{DaemonConfig, LogoMethodConfig, RsiWait};
+use topspin_daemon::record::Recorder;
 use topspin_daemon::record::RecordingSink;
-use topspin_daemon::record::{Recorder, calib_files};
 use topspin_daemon::rsi_server::WaitStrategy;
 use topspin_daemon::runtime::TelemetrySink;
 use topspin_daemon::runtime::{Daemon, LogoMethodChoice, LogoRuntime, RuntimeConfig, ThreadSpec};
@@ -117,7 +117,7 @@ pub fn run(a: RunArgs) -> anyhow::Result<()> {
             })
             .find(|p| !p.exists())
             .expect("an unused name");
-        let files = calib_files(cfg.calib.dir()).map_err(|e| BadInput(e.to_string()))?;
+        let files = calibration_texts(cfg.calib.dir()).map_err(|e| BadInput(e.to_string()))?;
         let rec = Recorder::create(&path, &cfg, &files).map_err(|e| BadInput(e.to_string()))?;
         tracing::info!(target: "topspin", "recording to {}", path.display());
         Some(RecordingSink::new(rec))

@@ -30,6 +30,37 @@ impl CalibDir for CameraCalib {
     }
 }
 
+/// The files of a `calib/` folder that make the [`Calibration`], in the
+/// order a recording carries them.
+pub const CALIBRATION_FILES: [&str; 4] = ["physics.toml", "table.toml", "strike.toml", "robot.toml"];
+/// The compiled-in texts of [`CALIBRATION_FILES`] (the repository's `calib/`).
+const CALIBRATION_DEFAULTS: [&str; 4] = [DEFAULT_PHYSICS, DEFAULT_TABLE, DEFAULT_STRIKE, DEFAULT_ROBOT];
+
+/// `(name, text)` of each of [`CALIBRATION_FILES`] as [`CalibDir::load`]
+/// reads it: from `dir`, or the compiled-in default where `dir` is `None`
+/// or lacks the file. What a recording carries.
+pub fn calibration_texts(dir: Option<&Path>) -> Result<Vec<(String, String)>, CalibError> {
+    CALIBRATION_FILES
+        .iter()
+        .zip(CALIBRATION_DEFAULTS)
+        .map(|(name, default)| read_or_default(dir, name, default).map(|(text, _)| ((*name).to_owned(), text)))
+        .collect()
+}
+
+/// The [`Calibration`] from `(name, text)` pairs, as
+/// [`calibration_texts`] gives them (a recording's): each of
+/// [`CALIBRATION_FILES`] from its text, the compiled-in default where the
+/// pairs lack it. Errors name the file as `origin/name`.
+pub fn calibration_from_texts(files: &[(String, String)], origin: &str) -> Result<Calibration, CalibError> {
+    let file = |i: usize| {
+        let name = CALIBRATION_FILES[i];
+        let text = files.iter().find(|(n, _)| n == name).map_or(CALIBRATION_DEFAULTS[i], |(_, t)| t.as_str());
+        (text, PathBuf::from(format!("{origin}/{name}")))
+    };
+    let (physics, table, strike, robot) = (file(0), file(1), file(2), file(3));
+    Calibration::from_texts((physics.0, &physics.1), (table.0, &table.1), (strike.0, &strike.1), (robot.0, &robot.1))
+}
+
 /// Loads `dir` as [`CalibDir::load`] does, with `robot_text` in place of
 /// its `robot.toml` (errors name `dir/robot.toml`): how a new `robot.toml`
 /// is checked against the rest of the cell before it replaces the old one.
@@ -99,5 +130,24 @@ mod tests {
         }
         let e = load_with_robot(Some(dir.path()), "[joints]\n").map(|_| ()).unwrap_err().to_string();
         assert!(e.contains("robot.toml"), "{e}");
+    }
+
+    #[test]
+    fn recorded_texts_give_the_folders_calibration_and_name_their_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let strike = DEFAULT_STRIKE.replace("hit_plane_x = 1.60", "hit_plane_x = 1.55");
+        std::fs::write(dir.path().join("strike.toml"), &strike).unwrap();
+        let texts = calibration_texts(Some(dir.path())).unwrap();
+        let names: Vec<&str> = texts.iter().map(|(n, _)| n.as_str()).collect();
+        assert_eq!(names, CALIBRATION_FILES);
+        assert_eq!(texts[2].1, strike);
+        assert_eq!(texts[0].1, DEFAULT_PHYSICS);
+        let from_texts = calibration_from_texts(&texts, "<recorded>").unwrap();
+        assert_eq!(from_texts, Calibration::load(Some(dir.path())).unwrap());
+        // A file the pairs lack is the default; a bad one is named.
+        assert_eq!(calibration_from_texts(&texts[..2], "<recorded>").unwrap(), Calibration::default_cell());
+        let bad = vec![("strike.toml".to_owned(), DEFAULT_STRIKE.replace("hit_plane_x = 1.60", "hit_plane_x = -3.0"))];
+        let e = calibration_from_texts(&bad, "<recorded>").unwrap_err().to_string();
+        assert!(e.contains("<recorded>/strike.toml") && e.contains("strike.hit_plane_x"), "{e}");
     }
 }

@@ -581,7 +581,7 @@ fn viewer_sink(
     };
     let recording = match &cfg.record {
         Some(path) => {
-            let files = topspin_daemon::record::calib_files(None).map_err(std::io::Error::other)?;
+            let files = topspin_daemon::calib_files::calibration_texts(None).map_err(std::io::Error::other)?;
             let rec = topspin_daemon::record::Recorder::create(path, &demo_daemon_config(cfg), &files)
                 .map_err(std::io::Error::other)?;
             Some(topspin_daemon::record::RecordingSink::new(rec))

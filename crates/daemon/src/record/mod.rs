@@ -82,8 +82,6 @@ pub const TOPIC_COUNTERS: &str = "/telemetry/counters";
 pub(crate) const ATTACHMENT_CONFIG: &str = "config.toml";
 /// Prefix of the attachments holding the calibration files.
 pub(crate) const ATTACHMENT_CALIB_PREFIX: &str = "calib/";
-/// The calibration files a recording carries (as in `calib/`).
-pub(crate) const CALIB_FILES: [&str; 4] = ["physics.toml", "table.toml", "strike.toml", "robot.toml"];
 /// Uncompressed size at which a chunk closes by itself, bytes.
 pub(crate) const CHUNK_SIZE: u64 = 256 * 1024;
 /// The MCAP profile field (and the name of the metadata record).
@@ -121,30 +119,6 @@ pub enum RecordError {
     /// A calibration file name that cannot be recorded.
     #[error("calibration file name {0:?} is not a plain file name")]
     BadCalibName(String),
-}
-
-/// The compiled-in calibration texts (the repository's `calib/`), in [`CALIB_FILES`] order.
-const DEFAULT_CALIB: [&str; 4] = [
-    topspin_core::calib::DEFAULT_PHYSICS,
-    topspin_core::calib::DEFAULT_TABLE,
-    topspin_core::calib::DEFAULT_STRIKE,
-    topspin_core::calib::DEFAULT_ROBOT,
-];
-
-/// The calibration texts [`CalibDir::load`](crate::calib_files::CalibDir::load) reads: each of
-/// `CALIB_FILES` from `dir`, or the compiled-in one where `dir` is `None`
-/// or lacks it — the `calib_files` argument of [`Recorder::create`].
-pub fn calib_files(dir: Option<&std::path::Path>) -> Result<Vec<(String, String)>, RecordError> {
-    let mut out = Vec::with_capacity(CALIB_FILES.len());
-    for (name, default) in CALIB_FILES.iter().zip(DEFAULT_CALIB) {
-        let text = match dir.map(|d| d.join(name)).filter(|p| p.exists()) {
-            Some(path) => std::fs::read_to_string(&path)
-                .map_err(|source| RecordError::Io { path: path.display().to_string(), source })?,
-            None => default.to_owned(),
-        };
-        out.push((name.to_string(), text));
-    }
-    Ok(out)
 }
 
 /// Lower-case hex of `bytes`.

@@ -1,6 +1,6 @@
 //! Reading a recording back (also one cut off by a crash).
 
-use crate::calib_files::CalibDir;
+use crate::calib_files::calibration_from_texts;
 use std::collections::HashMap;
 use std::net::SocketAddr;
 use std::path::Path;
@@ -65,27 +65,15 @@ pub struct Recording {
 }
 
 impl Recording {
-    /// The recorded calibration, rebuilt by [`CalibDir::load`](crate::calib_files::CalibDir::load) from the
-    /// recorded texts (written to a temporary folder, removed after).
+    /// The recorded calibration, parsed from the recorded texts as
+    /// [`CalibDir::load`](crate::calib_files::CalibDir::load) parses a
+    /// folder's (a file the recording lacks is the compiled-in default).
     pub fn calibration(&self) -> Result<Calibration, RecordError> {
-        static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
-        let n = NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-        let dir = std::env::temp_dir().join(format!("topspin-calib-{}-{n}", std::process::id()));
-        let shown = dir.display().to_string();
-        let io = |source| RecordError::Io { path: shown.clone(), source };
-        std::fs::create_dir_all(&dir).map_err(io)?;
-        let result = (|| {
-            for (name, text) in &self.calib_files {
-                if name.contains(['/', '\\']) || name.starts_with('.') {
-                    return Err(RecordError::BadCalibName(name.clone()));
-                }
-                std::fs::write(dir.join(name), text).map_err(io)?;
-            }
-            Calibration::load(Some(&dir))
-                .map_err(|e| RecordError::Invalid { path: "recorded calibration".to_owned(), message: e.to_string() })
-        })();
-        let _ = std::fs::remove_dir_all(&dir);
-        result
+        if let Some((name, _)) = self.calib_files.iter().find(|(n, _)| n.contains(['/', '\\']) || n.starts_with('.')) {
+            return Err(RecordError::BadCalibName(name.clone()));
+        }
+        calibration_from_texts(&self.calib_files, "<recorded>")
+            .map_err(|e| RecordError::Invalid { path: "recorded calibration".to_owned(), message: e.to_string() })
     }
 }
 
