@@ -3,7 +3,7 @@
 //! fit over the tracker's pre-bounce observations), the logo's spin from
 //! the rendered ceiling-camera crops of the same flight by background
 //! subtraction and by the CNN, and each logo spin fused with the
-//! trajectory's (\[`super::fusion`\]). Errors are |ω̂ − ω| against the
+//! trajectory's (`super::fusion`). Errors are |ω̂ − ω| against the
 //! simulator's truth.
 //!
 //! Rendering runs in parallel; the network runs on this thread (one
