@@ -93,9 +93,9 @@ fn session_with_robot() -> (RsiSession, MotionLimits, Vec<u8>) {
     (s, lim, Vec::new())
 }
 
-fn rob(ipoc: u64) -> Vec<u8> {
+/// A `<Rob>` of the arm standing at `home` (joint angles, degrees).
+fn rob(ipoc: u64, home: [f64; 6]) -> Vec<u8> {
     let mut buf = [0u8; 1024];
-    let home = MotionLimits::from_robot(&Calibration::default_cell().robot).home_joints.degrees();
     let f = RobFrame {
         ipoc,
         rist: Some(KukaPose::from_array([350.0, 0.0, 450.0, 180.0, 0.0, 0.0])),
@@ -122,6 +122,7 @@ proptest! {
         let mut prev = start;
         let mut v_prev = [0.0; 6];
         let mut plans = plans.into_iter();
+        let home = lim.home_joints.degrees();
         for k in 0..400u64 {
             let now = Instant(1_000_000_000 + k * 4_000_000);
             if k.is_multiple_of(25)
@@ -138,7 +139,7 @@ proptest! {
                 });
             }
             let ipoc = 1000 + 4 * k;
-            let n = s.handle_datagram(now, &rob(ipoc), &mut out).unwrap();
+            let n = s.handle_datagram(now, &rob(ipoc, home), &mut out).unwrap();
             let v = SenFrame::parse(&out[..n]).unwrap();
             prop_assert_eq!(v.ipoc, ipoc);
             let c = s.last_command();
