@@ -1,4 +1,4 @@
-//! `topspin bench latency --layout` (issue 17, item 7) as a user runs it:
+//! `topspin bench latency --layout` as a user runs it:
 //! `dedicated` refused with exit 2 and one line where the process may use
 //! too few cores (here under `taskset` to one CPU, so on any machine);
 //! `shared` runs and its JSON names the layout and what each thread got;

@@ -1,7 +1,7 @@
 //! `topspin demo --balls 30` end to end (the real binary): simulated
 //! tracker at 2 mm noise, daemon threads, mock KR C4 at 4 ms. At least 95 %
 //! of the reachable balls hit, zero late RSI answers, the bat home at the
-//! end, and the JSON of issue 5. Nine balls again with axis correction
+//! end, and the JSON. Nine balls again with axis correction
 //! (`--correction axis`: AKorr into the mock's AXISCORR context): the same
 //! hits as Cartesian (7 of 8 reachable at seed 7 in both modes), no AXISCORR
 //! clamp, no stop.

@@ -68,7 +68,7 @@ fn fit_json_matches_the_truth_and_names_false_detections() {
         }
         let spin = v3(&j["spin"]);
         let true_spin = v3(&truth["spin"]);
-        // The lift's scale is fitted per flight (issue 15) and trades with
+        // The lift's scale is fitted per flight and trades with
         // the spin's size: the error is what the reported σ says it is.
         let err = dist(spin, true_spin) / dist(true_spin, [0.0; 3]);
         assert!(err < 0.15, "ball {k}: spin {spin:?} vs {true_spin:?}");

@@ -1,4 +1,4 @@
-//! `topspin run` with a calibration it must not start on (issue 16, bad
+//! `topspin run` with a calibration it must not start on (bad
 //! input): limits that are not numbers, or an arm that cannot reach the
 //! hitting window, stop the start with exit 2 and one line naming the key,
 //! before a socket is bound.

@@ -1,4 +1,4 @@
-//! The daemon as a process under the signals systemd sends (issue 9):
+//! The daemon as a process under the signals systemd sends:
 //! SIGTERM in the middle of a stroke brings the bat home within limits and
 //! exits 0; SIGKILL mid-stroke leaves a recording that still opens and
 //! holds what was flushed; a restarted daemon (as `Restart=on-failure`

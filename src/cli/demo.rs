@@ -62,7 +62,7 @@ pub struct DemoArgs {
     /// Timeout, as the controller). For soaks that count every late answer.
     #[arg(long, hide = true)]
     pub late_limit: Option<u64>,
-    /// Mistreat the tracker stream with every fault of issue 9 (20 % loss,
+    /// Mistreat the tracker stream with every fault (20 % loss,
     /// 100 ms silences, duplicates, reordering, garbage at 10× the ball
     /// rate, a foreign ball, teleports, a clock jump): `sim::faults`.
     #[arg(long)]

@@ -1,4 +1,4 @@
-//! Property tests that fill the gaps issue 9 lists (the rest are listed in
+//! Property tests of the reliability invariants (the rest are listed in
 //! RELIABILITY.md): the safety filter alone under any request sequence, and
 //! the RSI session under a hostile controller (jittered arrivals, IPOC
 //! gaps, repeats and steps back) with hostile plans.

@@ -1,4 +1,4 @@
-//! Hostile input on the daemon's two sockets (issue 9, security): only the
+//! Hostile input on the daemon's two sockets (security): only the
 //! configured peers are heard, oversized datagrams are dropped rather than
 //! truncated into something that parses, and the default configuration
 //! binds loopback only. Loopback addresses other than 127.0.0.1 stand in

@@ -198,7 +198,7 @@ fn report_for_the_docs() {
     );
 }
 
-/// Issue 2: with the fitted spin, the bounce point of the spin shots is
+/// With the fitted spin, the bounce point of the spin shots is
 /// predicted better than without it (the refined fit with the spin held at
 /// zero, and the cubic baseline), under the shipped physics. Loose bounds.
 #[test]

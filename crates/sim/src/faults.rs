@@ -95,7 +95,7 @@ impl Default for TrackerFaults {
 }
 
 impl TrackerFaults {
-    /// Everything issue 9 lists at once: 20 % loss, a 100 ms silence about
+    /// Every fault at once: 20 % loss, a 100 ms silence about
     /// every 2 s, 5 % duplicates, 5 % reordered by 15 ms, garbage at 10× a
     /// 150 Hz tracker, a foreign ball, 1 % teleports, a +2 s clock jump 3 s in.
     pub fn all() -> Self {

@@ -1,4 +1,4 @@
-//! Judging returns, not touches (issue 16): where the bat's actual path
+//! Judging returns, not touches: where the bat's actual path
 //! (the mock KR C4's `RIst` log) first meets the true ball, what the rubber
 //! does to it there ([`RacketModel`]), and where the ball then flies with
 //! the simulator's own physics — over the net onto the opponent's half, or

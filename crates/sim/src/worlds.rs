@@ -1,4 +1,4 @@
-//! Worlds whose physics is not the estimator's (issue 15): the lift linear
+//! Worlds whose physics is not the estimator's: the lift linear
 //! at the two scales the codes in use disagree on, saturating, and with a
 //! lift-crisis valley; drag, restitution and friction across the
 //! literature's ranges; spin axes that are not perpendicular to the flight;

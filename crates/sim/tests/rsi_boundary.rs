@@ -1,5 +1,5 @@
 //! The robot boundary on the virtual clock, the RSI session against the
-//! mock KR C4 (issue 29): a start wherever the arm stands (home at the
+//! mock KR C4: a start wherever the arm stands (home at the
 //! commissioning speed, then play; or hold where the way home is unsafe),
 //! after every restart too; brakes applied mid-stroke (the stroke
 //! abandoned, no jump when the axes move again, the session goes on); a

@@ -1,5 +1,5 @@
-//! The streaming estimator learns the world across a session (issue 15
-//! item 5), on the virtual clock: simulated balls of a world unlike the
+//! The streaming estimator learns the world across a session, on the
+//! virtual clock: simulated balls of a world unlike the
 //! calibration, back to back and observed through the bounce, fed to the
 //! estimator one observation at a time. Exact where the claim is exact
 //! (learning off changes nothing, a reset starts from the calibration, a

@@ -71,7 +71,7 @@ fn thirty_balls_are_hit_on_virtual_time() {
     let on_the_plane = r.balls.iter().filter(|b| topspin_sim::demo::reachable(&cal, b)).count();
     assert!(r.reachable() > on_the_plane && on_the_plane >= 20, "{on_the_plane}: {}", summary(&r));
     assert!(r.hits() as f64 >= 0.95 * r.reachable() as f64, "{}", summary(&r));
-    // Returns (issue 16): over the net onto the opponent's half, judged on
+    // Returns: over the net onto the opponent's half, judged on
     // the bat's actual pose and velocity; robots in the literature return
     // 80–97 % of launcher balls. Those met off the plane, at the window's
     // edge, are the harder ones: over seeds 1–25 the cell returns 89.2 % of

@@ -1,4 +1,4 @@
-//! What the estimator learns across a session (issue 15): the things that
+//! What the estimator learns across a session: the things that
 //! do not change from one ball to the next — the table's restitution e and
 //! friction μ, read from the bounces it sees, the air's drag, read from
 //! each flight's deceleration, and how much of the velocity after a bounce

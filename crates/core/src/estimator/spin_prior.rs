@@ -1,4 +1,4 @@
-//! The session's spin prior (issue 30): the spin the table meets per unit
+//! The session's spin prior: the spin the table meets per unit
 //! of the spin a flight shows.
 //!
 //! A real ball's lift saturates, so a flight read through the
@@ -32,7 +32,7 @@ const SCALE_GRID: usize = 25;
 /// Most a bounce's normalised squared residual counts.
 const COST_CAP: f64 = 16.0;
 /// σ of ln(scale) about a bin's scale before it holds [`MIN_FOR_SHARE`]
-/// bounces: a flight's spin may be a third off (issue 30's real balls).
+/// bounces: a flight's spin may be a third off (real balls, `docs/physics.md`).
 pub(crate) const SHARE_START: f64 = 0.3;
 /// Bounces a bin needs before its own spread counts.
 const MIN_FOR_SHARE: usize = 4;

@@ -499,7 +499,7 @@ mod tests {
         assert_eq!(dirty.outliers, vec![0, 1]);
         let err_dirty = (dirty.spin - spin).norm() / spin.norm();
         // Two samples fewer at the start, and the spin's size shares the data
-        // with this flight's lift scale (fitted since issue 15).
+        // with this flight's lift scale (fitted per flight).
         assert!(err_dirty < 0.05, "dirty {err_dirty} clean {err} spin {:?} vs {:?}", dirty.spin, clean.spin);
         let (scales, std) = clean.scales.unwrap();
         assert!((scales.drag - 1.0).abs() < 3.0 * std.drag && std.drag < 0.05, "drag {scales:?} ± {std:?}");

@@ -1,4 +1,4 @@
-//! The real-data evaluation (issue 2): predict from the samples before the
+//! The real-data evaluation: predict from the samples before the
 //! net only, then compare with what the real ball did.
 //!
 //! For each trajectory (in the table frame): the leading samples with x < 0

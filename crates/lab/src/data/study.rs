@@ -1,4 +1,4 @@
-//! The real-data study of issue 2, end to end: predictions from the pre-net
+//! The real-data study, end to end: predictions from the pre-net
 //! samples with the fitted spin and without it, under the paper's physics
 //! and under calibrated physics; and the calibration itself (C_D, lift,
 //! e, μ) with the refined spin fit on all four sets. `topspin eval real`

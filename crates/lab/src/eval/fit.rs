@@ -1,4 +1,4 @@
-//! Accuracy of the batch spin fit on simulated launcher balls (issue 2):
+//! Accuracy of the batch spin fit on simulated launcher balls:
 //! for each tracker noise, each observation window (up to just before the
 //! bounce; up to the net) and each method (the paper's, ours refined), the
 //! spin error ‖ω̂ − ω‖/‖ω‖, the bounce-point error and the hitting-point

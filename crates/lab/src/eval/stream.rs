@@ -1,5 +1,5 @@
-//! Accuracy of the streaming estimator on simulated balls back to back
-//! (issue 3): the plan's hitting point and time against the truth as a
+//! Accuracy of the streaming estimator on simulated balls back to back:
+//! the plan's hitting point and time against the truth as a
 //! function of the time left before the hit, beside the batch fit on the
 //! same observations, and at the moment the ball crosses the net.
 

@@ -1,5 +1,5 @@
 //! The batch fit in worlds whose physics is not the estimator's
-//! (`topspin_sim::worlds`, issue 15): per world, tracker noise and window,
+//! (`topspin_sim::worlds`): per world, tracker noise and window,
 //! the default (refined) fit against the paper's method on the same balls.
 
 use serde::Serialize;

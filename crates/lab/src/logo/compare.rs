@@ -1,5 +1,5 @@
-//! The spin sources side by side on the same simulated flights (issue 7's
-//! "must show"): for each ball, the trajectory's spin (the refined Magnus
+//! The spin sources side by side on the same simulated flights: for each
+//! ball, the trajectory's spin (the refined Magnus
 //! fit over the tracker's pre-bounce observations), the logo's spin from
 //! the rendered ceiling-camera crops of the same flight by background
 //! subtraction and by the CNN, and each logo spin fused with the
