@@ -17,7 +17,7 @@ pub trait CalibDir: Sized {
 impl CalibDir for Calibration {
     fn load(dir: Option<&Path>) -> Result<Self, CalibError> {
         check_dir(dir)?;
-        let robot = read_or_default(dir, "robot.toml", DEFAULT_ROBOT)?;
+        let robot = read_file(dir, ROBOT)?;
         from_dir(dir, (&robot.0, &robot.1))
     }
 }
@@ -35,15 +35,18 @@ impl CalibDir for CameraCalib {
 pub const CALIBRATION_FILES: [&str; 4] = ["physics.toml", "table.toml", "strike.toml", "robot.toml"];
 /// The compiled-in texts of [`CALIBRATION_FILES`] (the repository's `calib/`).
 const CALIBRATION_DEFAULTS: [&str; 4] = [DEFAULT_PHYSICS, DEFAULT_TABLE, DEFAULT_STRIKE, DEFAULT_ROBOT];
+// Indices into [`CALIBRATION_FILES`].
+const PHYSICS: usize = 0;
+const TABLE: usize = 1;
+const STRIKE: usize = 2;
+const ROBOT: usize = 3;
 
 /// `(name, text)` of each of [`CALIBRATION_FILES`] as [`CalibDir::load`]
 /// reads it: from `dir`, or the compiled-in default where `dir` is `None`
 /// or lacks the file. What a recording carries.
 pub fn calibration_texts(dir: Option<&Path>) -> Result<Vec<(String, String)>, CalibError> {
-    CALIBRATION_FILES
-        .iter()
-        .zip(CALIBRATION_DEFAULTS)
-        .map(|(name, default)| read_or_default(dir, name, default).map(|(text, _)| ((*name).to_owned(), text)))
+    (0..CALIBRATION_FILES.len())
+        .map(|i| read_file(dir, i).map(|(text, _)| (CALIBRATION_FILES[i].to_owned(), text)))
         .collect()
 }
 
@@ -57,7 +60,7 @@ pub fn calibration_from_texts(files: &[(String, String)], origin: &str) -> Resul
         let text = files.iter().find(|(n, _)| n == name).map_or(CALIBRATION_DEFAULTS[i], |(_, t)| t.as_str());
         (text, PathBuf::from(format!("{origin}/{name}")))
     };
-    let (physics, table, strike, robot) = (file(0), file(1), file(2), file(3));
+    let (physics, table, strike, robot) = (file(PHYSICS), file(TABLE), file(STRIKE), file(ROBOT));
     Calibration::from_texts((physics.0, &physics.1), (table.0, &table.1), (strike.0, &strike.1), (robot.0, &robot.1))
 }
 
@@ -65,14 +68,15 @@ pub fn calibration_from_texts(files: &[(String, String)], origin: &str) -> Resul
 /// its `robot.toml` (errors name `dir/robot.toml`): how a new `robot.toml`
 /// is checked against the rest of the cell before it replaces the old one.
 pub fn load_with_robot(dir: Option<&Path>, robot_text: &str) -> Result<Calibration, CalibError> {
-    let robot_path = dir.map_or_else(|| PathBuf::from("<default>/robot.toml"), |d| d.join("robot.toml"));
+    let name = CALIBRATION_FILES[ROBOT];
+    let robot_path = dir.map_or_else(|| PathBuf::from(format!("<default>/{name}")), |d| d.join(name));
     from_dir(dir, (robot_text, &robot_path))
 }
 
 fn from_dir(dir: Option<&Path>, robot: (&str, &Path)) -> Result<Calibration, CalibError> {
-    let physics = read_or_default(dir, "physics.toml", DEFAULT_PHYSICS)?;
-    let table = read_or_default(dir, "table.toml", DEFAULT_TABLE)?;
-    let strike = read_or_default(dir, "strike.toml", DEFAULT_STRIKE)?;
+    let physics = read_file(dir, PHYSICS)?;
+    let table = read_file(dir, TABLE)?;
+    let strike = read_file(dir, STRIKE)?;
     Calibration::from_texts((&physics.0, &physics.1), (&table.0, &table.1), (&strike.0, &strike.1), robot)
 }
 
@@ -84,6 +88,11 @@ fn check_dir(dir: Option<&Path>) -> Result<(), CalibError> {
         }),
         _ => Ok(()),
     }
+}
+
+/// [`read_or_default`] for file `i` of [`CALIBRATION_FILES`].
+fn read_file(dir: Option<&Path>, i: usize) -> Result<(String, PathBuf), CalibError> {
+    read_or_default(dir, CALIBRATION_FILES[i], CALIBRATION_DEFAULTS[i])
 }
 
 /// `dir/name`'s text and path, or the compiled default's with the path

@@ -56,8 +56,7 @@ pub struct VirtualRun {
     pub last_plans: Vec<StrikePlan>,
     /// What the tracker-side fault injector did, if it ran.
     pub injected: Option<InjectedCounts>,
-    /// The logo stream's counters (with `runtime.logo`), and the logo
-    /// spins the estimator fused and refused at its gate.
+    /// The logo stream's counters (with `runtime.logo`).
     pub logo: Option<LogoCounters>,
     /// Logo spins the estimator fused into a track.
     pub logo_spins_fused: u64,

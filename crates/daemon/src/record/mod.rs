@@ -121,6 +121,12 @@ pub enum RecordError {
     BadCalibName(String),
 }
 
+/// Whether a calibration file's name is a plain file name, as a recording
+/// may carry it: not empty, no path separator, not hidden nor `.`/`..`.
+pub(crate) fn plain_file_name(name: &str) -> bool {
+    !name.is_empty() && !name.contains(['/', '\\']) && !name.starts_with('.')
+}
+
 /// Lower-case hex of `bytes`.
 pub(crate) fn to_hex(bytes: &[u8]) -> String {
     const DIGITS: &[u8; 16] = b"0123456789abcdef";
@@ -364,6 +370,16 @@ pub mod schema {
 mod tests {
     use super::*;
     use proptest::prelude::*;
+
+    #[test]
+    fn only_plain_file_names_are_recorded_or_read() {
+        for ok in ["physics.toml", "robot.toml", "a"] {
+            assert!(plain_file_name(ok), "{ok}");
+        }
+        for bad in ["", ".", "..", ".hidden", "../robot.toml", "calib/robot.toml", "c:\\robot.toml", "/etc/passwd"] {
+            assert!(!plain_file_name(bad), "{bad}");
+        }
+    }
 
     #[test]
     fn hex_round_trips_and_rejects_non_hex() {

@@ -9,7 +9,7 @@ use mcap::records::Record;
 
 use super::{
     ATTACHMENT_CALIB_PREFIX, ATTACHMENT_CONFIG, DatagramMsg, META_LOG_TIME_OFFSET, PROFILE, PlanMsg, RecordError,
-    RsiMsg, TOPIC_COUNTERS, TOPIC_DATAGRAM, TOPIC_PLAN, TOPIC_RSI, from_hex,
+    RsiMsg, TOPIC_COUNTERS, TOPIC_DATAGRAM, TOPIC_PLAN, TOPIC_RSI, from_hex, plain_file_name,
 };
 use crate::config::DaemonConfig;
 use topspin_core::calib::Calibration;
@@ -69,7 +69,7 @@ impl Recording {
     /// [`CalibDir::load`](crate::calib_files::CalibDir::load) parses a
     /// folder's (a file the recording lacks is the compiled-in default).
     pub fn calibration(&self) -> Result<Calibration, RecordError> {
-        if let Some((name, _)) = self.calib_files.iter().find(|(n, _)| n.contains(['/', '\\']) || n.starts_with('.')) {
+        if let Some((name, _)) = self.calib_files.iter().find(|(n, _)| !plain_file_name(n)) {
             return Err(RecordError::BadCalibName(name.clone()));
         }
         calibration_from_texts(&self.calib_files, "<recorded>")

@@ -10,7 +10,7 @@ use mcap::records::MessageHeader;
 
 use super::{
     ATTACHMENT_CALIB_PREFIX, ATTACHMENT_CONFIG, CHUNK_SIZE, DatagramMsg, META_LOG_TIME_OFFSET, PROFILE, PlanMsg,
-    RecordError, RsiMsg, TOPIC_COUNTERS, TOPIC_DATAGRAM, TOPIC_PLAN, TOPIC_RSI, schema,
+    RecordError, RsiMsg, TOPIC_COUNTERS, TOPIC_DATAGRAM, TOPIC_PLAN, TOPIC_RSI, plain_file_name, schema,
 };
 use crate::channels::{TOPICS, Topic};
 use crate::config::DaemonConfig;
@@ -69,7 +69,7 @@ impl std::fmt::Debug for Recorder {
 impl Recorder {
     /// Creates `path` (replacing a file there) and writes the configuration,
     /// the calibration texts (`(file name, TOML text)`, e.g. from
-    /// [`super::calib_files`]) and the channels, flushed to disk before the
+    /// [`calibration_texts`](crate::calib_files::calibration_texts)) and the channels, flushed to disk before the
     /// first message.
     pub fn create(
         path: &Path,
@@ -77,7 +77,7 @@ impl Recorder {
         calib_files: &[(String, String)],
     ) -> Result<Recorder, RecordError> {
         for (name, _) in calib_files {
-            if name.is_empty() || name.contains(['/', '\\']) || name == "." || name == ".." {
+            if !plain_file_name(name) {
                 return Err(RecordError::BadCalibName(name.clone()));
             }
         }
