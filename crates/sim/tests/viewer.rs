@@ -33,13 +33,14 @@ use topspin_core::kinematics::{FRAMES, Joints};
 use topspin_core::physics::Vec3;
 use topspin_core::rsi::RobFrame;
 use topspin_core::time::Duration;
+use topspin_daemon::channels::{TOPICS, Topic};
 use topspin_daemon::record::RecordingSink;
 use topspin_daemon::record::replay_recording;
 use topspin_daemon::record::{
     Recorder, Recording, TOPIC_COUNTERS, TOPIC_DATAGRAM, TOPIC_PLAN, TOPIC_RSI, read_recording,
 };
 use topspin_daemon::viewer::view_recording;
-use topspin_daemon::viewer::{LiveServer, TOPICS, Topic, ViewerSink};
+use topspin_daemon::viewer::{LiveServer, ViewerSink};
 use topspin_sim::demo::{DemoConfig, run};
 use topspin_sim::probe;
 

@@ -14,10 +14,9 @@ use crate::physics::{PhysicsParams, Propagator, RacketModel, RacketParams, Table
 pub(crate) mod robot;
 pub use camera::{CameraCalib, CameraSection, DEFAULT_CAMERA, LogoSection};
 pub use robot::{
-    BadKey, CellPlacement, HomePose, JointAxes, PosCorrLimits, RobotModel, RsiTiming, ServoModel, StartPolicy,
-    TcpLimits, Workspace,
+    BadKey, CellPlacement, HomePose, JointAxes, PosCorrLimits, RobotFile, RobotModel, RsiTiming, ServoModel,
+    StartPolicy, TcpLimits, Workspace, lag_step,
 };
-pub use robot::{RobotFile, lag_step};
 
 /// The compiled-in defaults (the repository's `calib/` folder).
 /// The repository's `calib/physics.toml`, compiled in.

@@ -10,7 +10,8 @@ use std::sync::Arc;
 
 use foxglove::{Context, PartialMetadata, RawChannel, WebSocketServer, WebSocketServerHandle};
 
-use super::{TOPICS, Topic, ViewerError};
+use super::ViewerError;
+use crate::channels::{TOPICS, Topic};
 
 /// Messages a client may fall behind before the SDK drops its oldest.
 pub(crate) const CLIENT_BACKLOG: usize = 1024;

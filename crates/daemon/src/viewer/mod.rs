@@ -26,12 +26,12 @@
 //! | `/plot/spin` | JSON | the EKF spin per observation: `trajectory`, `x_rps`, `y_rps`, `z_rps`, `norm_rps` |
 //! | `/plot/prediction_error` | JSON | when a ball ends, per plan: `time_to_hit_s`, `error_mm` (hitting point), `dt_ms` (hitting time) against `reference` (`truth` in the demo, else the ball's last plan) |
 //! | `/plot/rsi` | JSON | per RSI answer: `latency_us`, `controller_late` (the controller's count), `slow_answers`, `plans_late`, `plans_rejected` |
-//! | `/plot/queues` | JSON | [`QueueDepths`] every `crate::runtime::telemetry::QUEUE_INTERVAL_S` |
+//! | `/plot/queues` | JSON | [`QueueDepths`](crate::runtime::QueueDepths) every `crate::runtime::telemetry::QUEUE_INTERVAL_S` |
 //! | `/logo/crop` | `foxglove.RawImage` | the logo thread's crop (`rgb8`) |
 //! | `/logo/fit` | `foxglove.ImageAnnotations` | on the crop: the ball (circle) and the detected logo (filled dot) |
 //!
 //! The logo thread (built elsewhere) feeds `/logo/*` by pushing a
-//! [`LogoRecord`] into [`crate::runtime::daemon::Daemon::logo_tx`]; the
+//! [`LogoRecord`](crate::runtime::LogoRecord) into [`crate::runtime::daemon::Daemon::logo_tx`]; the
 //! telemetry thread hands it to [`ViewerSink::logo`](sink::ViewerSink).
 //!
 //! Log times are wall clock: the monotonic time + `crate::clock::unix_offset_ns`.
@@ -46,8 +46,6 @@ use nalgebra::{Rotation3, UnitQuaternion};
 use serde::Serialize;
 use topspin_core::geometry::rot_zyx;
 
-pub use crate::channels::{TOPICS, Topic};
-pub use crate::runtime::telemetry::{LogoRecord, QueueDepths};
 pub use live::LiveServer;
 pub use replay::view_recording;
 pub use sink::{DemoTruth, TrueHit, ViewerSink};
@@ -206,6 +204,7 @@ pub fn stamp(ns: u64) -> fm::Timestamp {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::channels::TOPICS;
     use topspin_core::physics::Vec3;
 
     /// `v` turned by `q`.

@@ -14,8 +14,9 @@ use super::arm::{self, ArmView};
 use super::{
     CELL_INTERVAL_S, FRAME_BASE, FRAME_TABLE, IDENTITY, LiveServer, OBS_LIFETIME_S, PREDICTION_HORIZON_S,
     PREDICTION_STEP_S, PredictionErrorPlot, ROBOT_LIFETIME_S, RsiPlot, SPIN_ARROW_M_PER_RPS, SpinPlot, TCP_DECIMATION,
-    TOPICS, TRACK_LIFETIME_S, Topic, color, p3, pose, quat_x_to, quat_zyx, stamp, v3,
+    TRACK_LIFETIME_S, color, p3, pose, quat_x_to, quat_zyx, stamp, v3,
 };
+use crate::channels::{TOPICS, Topic};
 use crate::record::sink::RecordingSink;
 use crate::runtime::telemetry::{
     DatagramRecord, LOGO_CROP_SIDE, LogoRecord, QueueDepths, RsiRecord, Telemetry, TelemetrySink,

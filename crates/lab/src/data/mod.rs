@@ -36,7 +36,6 @@ pub use frame::{
 pub use mpi::{DATA_ENV, MpiError, RealTrajectory, SETS, SamplingStats, load, locate, median, sampling_stats};
 pub use spin::{FitPredictor, SpinFit};
 pub use study::{
-    LiftChoice, PREDICTORS, Variant, Which, calibrate_lift, calibration_markdown, compare, eval_config, markdown,
-    objective, params_json, rows_json, spin_markdown, spin_summary,
+    LiftChoice, PREDICTORS, Row, SpinSummary, Variant, Which, calibrate_lift, calibration_markdown, compare,
+    eval_config, markdown, objective, params_json, rows_json, spin_markdown, spin_summary,
 };
-pub use study::{Row, SpinSummary};
