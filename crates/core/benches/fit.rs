@@ -46,7 +46,7 @@ fn benches(c: &mut Criterion) {
     let last = samples[samples.len() - 1];
     let state = BallState::new(cubic.pos(last.t), cubic.vel(last.t), lin.spin_linear);
     c.bench_function("fit/predict_bounce_to_hit_plane", |b| {
-        b.iter(|| predict(&prop, black_box(&state), last.t, cal.strike.hit_plane_x))
+        b.iter(|| predict(&prop, black_box(&state), last.t, cal.strike.hit_plane_x, false))
     });
 }
 

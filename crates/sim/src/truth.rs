@@ -80,7 +80,8 @@ pub struct Truth {
     pub net_crossing_t: Option<f64>,
     /// The hitting plane, m.
     pub hit_plane_x: f64,
-    /// The crossing of the hitting plane after the bounce, or null.
+    /// The crossing of the hitting plane after the bounce (and before a
+    /// second bounce on the robot's half), or null.
     pub hit: Option<HitTruth>,
     /// When the flight ends for the tracker: the hit, else the floor or
     /// the time limit, s.
@@ -112,11 +113,13 @@ impl Truth {
         let stop = StopAt { t_max: FLIGHT_T_MAX, hit_plane_x: Some(hit_plane_x), net: false };
         let (mut s, mut t) = (s0, 0.0);
         let mut bounce = None;
+        let mut bounced_twice = false;
         let mut hit = None;
         let end_t = loop {
             match prop.advance(&mut s, &mut t, &stop) {
                 Event::Bounce { t, before } => {
                     // A serve's bounce on its own half is not the one played.
+                    bounced_twice |= bounce.is_some() && before.pos.x > 0.0;
                     if bounce.is_none() && before.pos.x > 0.0 {
                         bounce = Some(BounceTruth {
                             t,
@@ -128,7 +131,7 @@ impl Truth {
                     }
                 }
                 Event::HitPlane { t } => {
-                    if bounce.is_some() {
+                    if bounce.is_some() && !bounced_twice {
                         hit = Some(HitTruth { t, pos: s.pos.into(), vel: s.vel.into(), spin: s.spin.into() });
                     }
                     break t;
@@ -149,9 +152,9 @@ impl Truth {
         }
     }
 
-    /// The crossing of the plane x after the bounce on the robot's half,
-    /// flown with `prop` (the ball's own physics): [`Truth::hit`] for
-    /// another plane of the hitting volume.
+    /// The crossing of the plane x after the bounce on the robot's half
+    /// and before a second one there, flown with `prop` (the ball's own
+    /// physics): [`Truth::hit`] for another plane of the hitting volume.
     pub fn crossing_at(&self, prop: &Propagator, x: f64) -> Option<HitTruth> {
         if x == self.hit_plane_x {
             return self.hit;
@@ -161,6 +164,9 @@ impl Truth {
         let mut bounced = false;
         loop {
             match prop.advance(&mut s, &mut t, &stop) {
+                // A second bounce on the robot's half: the ball was not
+                // played in time.
+                Event::Bounce { before, .. } if bounced && before.pos.x > 0.0 => return None,
                 Event::Bounce { before, .. } => bounced |= before.pos.x > 0.0,
                 Event::HitPlane { t } if bounced => {
                     return Some(HitTruth { t, pos: s.pos.into(), vel: s.vel.into(), spin: s.spin.into() });

@@ -777,10 +777,12 @@ impl Estimator {
     fn plan(&mut self, t: f64, out: &mut StepOutput) {
         let Some(track) = &mut self.track else { return };
         let state = track.ekf.state();
-        let prediction = predict(&track.prop, &state, t, self.strike.hit_plane_x);
+        // Bounced already: the ball is played before its next bounce.
+        let bounced = track.ekf.bounces > 0;
+        let prediction = predict(&track.prop, &state, t, self.strike.hit_plane_x, bounced);
         self.last_prediction = Some(prediction);
         let volume = HittingVolume { strike: &self.strike, planes: &self.planes, reach: &self.reach };
-        let (hit, plane) = match volume.choose(&track.prop, &state, t, &prediction, track.hit_x) {
+        let (hit, plane) = match volume.choose(&track.prop, &state, t, &prediction, track.hit_x, bounced) {
             Ok(chosen) => chosen,
             Err(reason) => {
                 out.push(EstimatorEvent::Withheld { trajectory: track.id, t, reason });
@@ -874,7 +876,9 @@ impl HittingVolume<'_> {
     ///   the arm can present a face there), the nearest to the nominal of
     ///   equals.
     ///
-    /// `Err`: why the nominal plane does not work, where none does.
+    /// `bounced`: the ball has bounced on the robot's half, so no plane
+    /// past its next bounce counts. `Err`: why the nominal plane does not
+    /// work, where none does.
     fn choose(
         &self,
         prop: &Propagator,
@@ -882,6 +886,7 @@ impl HittingVolume<'_> {
         t: f64,
         nominal: &Prediction,
         last_x: Option<f64>,
+        bounced: bool,
     ) -> Result<(HitPoint, usize), Withheld> {
         let home = self.strike.nominal_plane();
         let at_home = match nominal.hit {
@@ -896,7 +901,7 @@ impl HittingVolume<'_> {
         if last == Some(home) && matches!(at_home, Ok(_) | Err(Withheld::TooSoon)) {
             return at_home;
         }
-        let crossings = crate::fit::predict::crossings::<MAX_HITTING_PLANES>(prop, state, t, self.planes);
+        let crossings = crate::fit::predict::crossings::<MAX_HITTING_PLANES>(prop, state, t, self.planes, bounced);
         let on = |k: usize| -> Result<HitPoint, Withheld> {
             if k == home {
                 return at_home.map(|(hit, _)| hit);

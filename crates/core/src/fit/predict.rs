@@ -69,8 +69,10 @@ pub struct Prediction {
 /// Predicts from `state` at time `t`: the next table contact on the
 /// robot's half and the crossing of the plane x = `hit_plane_x` towards +x
 /// (after at most one bounce there; a serve's bounce on its own half
-/// before it is flown through).
-pub fn predict(prop: &Propagator, state: &BallState, t: f64, hit_plane_x: f64) -> Prediction {
+/// before it is flown through). `bounced`: the ball has bounced on the
+/// robot's half already, so its next bounce there is its second and ends
+/// the flight (the ball must be played before it).
+pub fn predict(prop: &Propagator, state: &BallState, t: f64, hit_plane_x: f64, bounced: bool) -> Prediction {
     let stop = StopAt { t_max: t + PREDICTION_HORIZON, hit_plane_x: Some(hit_plane_x), net: true };
     let prop = &Propagator { dt: prop.dt.max(PREDICT_STEP), ..*prop };
     let (mut s, mut now) = (*state, t);
@@ -78,9 +80,9 @@ pub fn predict(prop: &Propagator, state: &BallState, t: f64, hit_plane_x: f64) -
     let end = loop {
         match prop.advance(&mut s, &mut now, &stop) {
             // A serve's bounce on its own half: not a contact the robot plays.
-            Event::Bounce { before, .. } if before.pos.x <= 0.0 && bounce.is_none() => {}
+            Event::Bounce { before, .. } if before.pos.x <= 0.0 && bounce.is_none() && !bounced => {}
             Event::Bounce { t, before } => {
-                if bounce.is_some() {
+                if bounced || bounce.is_some() {
                     break FlightEnd::SecondBounce;
                 }
                 bounce = Some(Contact { t, pos: before.pos, before, after: s });
@@ -98,18 +100,19 @@ pub fn predict(prop: &Propagator, state: &BallState, t: f64, hit_plane_x: f64) -
 
 /// The crossings of the planes x = `planes[k]` (ascending, m) towards +x
 /// from `state` at time `t`, on the flight [`predict`] follows (through at
-/// most one bounce on the robot's half): `out[k]` for plane k, `None` where
-/// the ball is past it already or the flight ends first. One integration
-/// for all of them.
+/// most one bounce on the robot's half, none where `bounced`): `out[k]`
+/// for plane k, `None` where the ball is past it already or the flight
+/// ends first. One integration for all of them.
 pub(crate) fn crossings<const N: usize>(
     prop: &Propagator,
     state: &BallState,
     t: f64,
     planes: &[f64],
+    bounced: bool,
 ) -> heapless::Vec<Option<HitPoint>, N> {
     let prop = &Propagator { dt: prop.dt.max(PREDICT_STEP), ..*prop };
     let (mut s, mut now) = (*state, t);
-    let (mut bounced, mut ended) = (false, false);
+    let (mut bounced, mut ended) = (bounced, false);
     let mut out = heapless::Vec::new();
     for &x in planes.iter().take(N) {
         let mut crossing = None;
@@ -153,7 +156,7 @@ mod tests {
                 [Vec3::new(0.0, 500.0, 0.0), Vec3::new(0.0, -300.0, 40.0), Vec3::new(60.0, 80.0, 350.0), Vec3::zeros()]
             {
                 let s = BallState::new(Vec3::new(-1.5, 0.1, 0.3), Vec3::new(vx, -0.2, vz), spin);
-                let p = predict(&cal.propagator(), &s, 0.0, x);
+                let p = predict(&cal.propagator(), &s, 0.0, x, false);
                 // The reference: the same flight at 0.5 ms steps.
                 let (mut r, mut t, mut bounces) = (s, 0.0, 0);
                 let stop = StopAt { t_max: PREDICTION_HORIZON, hit_plane_x: Some(x), net: true };
@@ -185,19 +188,39 @@ mod tests {
         let prop = cal.propagator();
         let planes = [1.45, 1.50, 1.60, 1.75];
         let s = BallState::new(Vec3::new(-1.5, 0.1, 0.3), Vec3::new(5.5, -0.2, 1.4), Vec3::new(0.0, 100.0, 0.0));
-        let first = predict(&prop, &s, 0.2, planes[0]);
+        let first = predict(&prop, &s, 0.2, planes[0], false);
         assert_eq!(first.end, FlightEnd::HitPlane, "{first:?}");
-        let c = crossings::<4>(&prop, &s, 0.2, &planes);
+        let c = crossings::<4>(&prop, &s, 0.2, &planes, false);
         assert_eq!(c.len(), 4);
         for (x, got) in planes.iter().zip(&c) {
-            let one = predict(&prop, &s, 0.2, *x).hit.expect("it reaches every plane");
+            let one = predict(&prop, &s, 0.2, *x, false).hit.expect("it reaches every plane");
             let got = got.expect("a crossing");
             assert!((got.state.pos - one.state.pos).norm() < 1e-6 && (got.t - one.t).abs() < 1e-7, "{x}");
             assert!((got.state.pos.x - x).abs() < 1e-9);
         }
         // Past the first plane already: none there, the others as before.
         let later = BallState { pos: Vec3::new(1.47, c[0].unwrap().state.pos.y, 0.3), ..c[0].unwrap().state };
-        let c2 = crossings::<4>(&prop, &later, 0.0, &planes);
+        let c2 = crossings::<4>(&prop, &later, 0.0, &planes, false);
         assert!(c2[0].is_none() && c2[1].is_some());
+    }
+
+    #[test]
+    fn a_ball_that_has_bounced_is_played_before_it_bounces_again() {
+        // A slow ball just off its bounce at x = 0.5 m: it comes down on
+        // the table again short of the hitting plane.
+        let cal = Calibration::default_cell();
+        let prop = cal.propagator();
+        let x = cal.strike.hit_plane_x;
+        let s = BallState::new(Vec3::new(0.5, 0.4, 0.05), Vec3::new(1.7, -0.1, 2.3), Vec3::zeros());
+        let flown_on = predict(&prop, &s, 0.0, x, false);
+        let second = flown_on.bounce.expect("it comes down again");
+        assert!(second.pos.x < 1.37, "{second:?}");
+        assert_eq!(flown_on.end, FlightEnd::HitPlane, "unaware of the first bounce, it plays past the second");
+        let played = predict(&prop, &s, 0.0, x, true);
+        assert_eq!((played.bounce, played.hit, played.end), (None, None, FlightEnd::SecondBounce));
+        let planes = [0.9, x];
+        let c = crossings::<2>(&prop, &s, 0.0, &planes, true);
+        assert!(c[0].is_some() && c[1].is_none(), "{c:?}");
+        assert!(crossings::<2>(&prop, &s, 0.0, &planes, false)[1].is_some());
     }
 }

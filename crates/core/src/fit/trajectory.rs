@@ -299,7 +299,7 @@ pub fn fit_trajectory(samples: &[Sample], prop: &Propagator, cfg: &FitConfig) ->
     // from the post-bounce samples.
     let fit_after = enough_after_bounce(post);
     let (t_last, state_last) = if fit_after {
-        let p = predict(prop, &before.state_end, before.t_end, f64::INFINITY);
+        let p = predict(prop, &before.state_end, before.t_end, f64::INFINITY, false);
         let spin_after = p.bounce.map(|c| c.after.spin).unwrap_or(spin);
         let post_cubic = Cubic::fit(post.iter()).ok_or(FitError::Degenerate)?;
         let t = post[post.len() - 1].t;
@@ -325,7 +325,7 @@ pub fn fit_trajectory(samples: &[Sample], prop: &Propagator, cfg: &FitConfig) ->
     rejected.sort_unstable();
     let used_post = if fit_after { clean.len() - pre.len() } else { 0 };
     let samples_used = pre.len() + used_post - fit_rejects.len();
-    let prediction = predict(prop, &state_last, t_last, cfg.hit_plane_x);
+    let prediction = predict(prop, &state_last, t_last, cfg.hit_plane_x, fit_after);
     Ok(TrajectoryFit {
         method: cfg.method,
         spin,
