@@ -361,6 +361,7 @@ pub fn aim(
     // The best clear landing of this call: (miss, face, level, landing).
     let mut best: Option<(f64, [f64; 2], usize, Landing)> = warm.and_then(|w| w.best);
     let mut converged = false;
+    let mut restarted = false;
     while left > 0 {
         let now = *here.get_or_insert_with(|| fly_at(&p, level, &mut left, &mut flown));
         let j = match jac {
@@ -423,9 +424,19 @@ pub fn aim(
         let last = level + 1 >= SPEED_STEPS;
         if norm2 < 1e-12 || (tries + flown >= LEVEL_FLIGHTS && !last) {
             // Out of reach, against a bound, or not landing it after
-            // LEVEL_FLIGHTS: a faster bat, from the start.
+            // LEVEL_FLIGHTS: a faster bat, from the start. The fastest
+            // against a bound starts again from the start (once a call):
+            // the prediction may have moved since it got there.
             if last {
-                break;
+                let from = start(&target);
+                if (p[0] - from[0]).abs() + (p[1] - from[1]).abs() < FD_STEP || restarted {
+                    break;
+                }
+                restarted = true;
+                p = from;
+                jac = None;
+                here = None;
+                continue;
             }
             level += 1;
             p = start(&target);
@@ -565,6 +576,21 @@ mod tests {
         assert!(again.converged);
         assert!((again.tilt - first.tilt).abs() < 0.05);
         assert_eq!(again.speed_step, first.speed_step);
+    }
+
+    #[test]
+    fn a_search_stuck_against_a_bound_starts_again_when_the_ball_moves() {
+        let (bounds, target, prop, racket) = cell();
+        // Heavy backspin, slow and low: the search ends against the open
+        // bound at the fastest bat, without landing it.
+        let heavy = BallState::new(Vec3::new(1.6, 0.0, 0.16), Vec3::new(2.0, 0.0, -1.0), Vec3::new(0.0, -900.0, 0.0));
+        let stuck = aim(&bounds, target, &prop, &racket, &heavy, tilt0(&heavy), None, 64);
+        assert!(!stuck.converged && stuck.level + 1 == SPEED_STEPS, "{stuck:?}");
+        // The prediction moves to a ball the start face lands: the search
+        // leaves the bound and lands it, not the face found for the other.
+        let b = balls()[3];
+        let again = aim(&bounds, target, &prop, &racket, &b, tilt0(&b), Some(&stuck), 64);
+        assert!(again.converged, "{again:?}");
     }
 
     #[test]
