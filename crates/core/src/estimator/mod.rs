@@ -606,9 +606,9 @@ impl Estimator {
         ekf.p.fixed_view_mut::<3, 3>(6, 6).copy_from(&spin_cov);
         let mut prop = self.session_propagator();
         if self.cfg.learn.enabled && self.cfg.learn.spin {
-            let s = spin_prior::spin_parameter(&ekf.state(), prop.bounce.radius);
-            prop.bounce = prop.bounce.with_spin_scale(self.session.spin.scale_at(s));
-            ekf.noise.bounce_spin_share = self.session.spin.share_at(s);
+            let (k, share) = self.session.spin.ball_scale(&ekf.state(), prop.bounce.radius);
+            prop.bounce = prop.bounce.with_spin_scale(k);
+            ekf.noise.bounce_spin_share = share;
         }
         for s in &inliers {
             ekf.predict(&prop, s.t);
@@ -658,9 +658,9 @@ impl Estimator {
                 track.prop.bounce = track.prop.bounce.with_spin_scale(k);
                 track.ekf.noise.bounce_spin_share = sigma;
             } else if cfg.learn.enabled && cfg.learn.spin {
-                let s = spin_prior::spin_parameter(&state, self.prop.bounce.radius);
-                track.prop.bounce = track.prop.bounce.with_spin_scale(self.session.spin.scale_at(s));
-                track.ekf.noise.bounce_spin_share = self.session.spin.share_at(s);
+                let (k, share) = self.session.spin.ball_scale(&state, self.prop.bounce.radius);
+                track.prop.bounce = track.prop.bounce.with_spin_scale(k);
+                track.ekf.noise.bounce_spin_share = share;
             }
         }
         let mut trial = track.ekf;

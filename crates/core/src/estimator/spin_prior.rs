@@ -16,7 +16,12 @@
 //! A ball whose spin the ceiling camera read ([`SpinPrior::take_logo`])
 //! tells its scale directly, with the logo's own uncertainty: it is kept
 //! and weighed beside the bounces, fast spins included (whose contacts
-//! slide). Fixed memory ([`BIN_MEMORY`] readings a bin), bounded work.
+//! slide). Each ball so read is also kept with its speed and lift
+//! direction: a launcher's spin, and a player's, grows with the ball's
+//! speed, and where enough alike balls were read, their spin is weighed
+//! against the bin's for the next ball ([`SpinPrior::ball_scale`]).
+//! Fixed memory ([`BIN_MEMORY`] readings a bin, [`SPEED_MEMORY`] balls),
+//! bounded work.
 
 use crate::physics::{BallState, BounceModel, Vec3};
 
@@ -48,6 +53,38 @@ const MIN_SURFACE_SPEED: f64 = 0.3;
 /// The spin parameter S = r‖ω‖/‖v‖ of a state.
 pub(crate) fn spin_parameter(state: &BallState, radius: f64) -> f64 {
     radius * state.spin.norm() / state.vel.norm().max(1e-9)
+}
+
+/// Balls whose own spin the prior keeps with their speed (the latest).
+const SPEED_MEMORY: usize = 48;
+/// Width of the kernel in ln(speed) over which balls count as alike.
+const SPEED_KERNEL: f64 = 0.08;
+/// Least summed kernel weight of alike balls for their spin to count.
+const SPEED_MIN_WEIGHT: f64 = 3.0;
+/// Least σ of ln(spin) of alike balls (a launcher's spin at one setting
+/// strays by about this much).
+const SPEED_SHARE_FLOOR: f64 = 0.08;
+
+/// Which way a ball's lift points: down (topspin), up (backspin) or
+/// sideways; balls are alike only with the same.
+fn lift_class(state: &BallState) -> i8 {
+    let lift = state.spin.cross(&state.vel);
+    let up = lift.z / lift.norm().max(1e-12);
+    if up < -0.5 {
+        1
+    } else if up > 0.5 {
+        -1
+    } else {
+        0
+    }
+}
+
+/// One ball's own spin, as the prior keeps it with its speed.
+#[derive(Copy, Clone, Debug, PartialEq)]
+struct SpinSeen {
+    ln_speed: f64,
+    class: i8,
+    ln_spin: f64,
 }
 
 fn grid(k: usize) -> f64 {
@@ -92,6 +129,14 @@ fn fitting(costs: &[f64; SCALE_GRID]) -> (usize, usize) {
     (lo, hi)
 }
 
+/// One ball's own scale from its costs: the middle of what fits it, or
+/// where only bounded from below, no less than its bound and `bin` (the
+/// scale of its bin).
+fn own_scale(costs: &[f64; SCALE_GRID], bin: f64) -> f64 {
+    let (lo, hi) = fitting(costs);
+    if hi == SCALE_GRID - 1 { grid(lo).max(bin) } else { (grid(lo) * grid(hi)).sqrt() }
+}
+
 #[derive(Copy, Clone, Debug, PartialEq)]
 struct Bin {
     seen: [Option<Seen>; BIN_MEMORY],
@@ -105,6 +150,10 @@ struct Bin {
 #[derive(Copy, Clone, Debug, PartialEq)]
 pub struct SpinPrior {
     bins: [Bin; SPIN_BINS],
+    /// Each ball's own spin as its bounce or the camera read it, with its
+    /// speed and lift direction: how much spin comes with a speed.
+    by_speed: [Option<SpinSeen>; SPEED_MEMORY],
+    by_speed_next: usize,
     /// Bounces and logo readings taken in (that told something about the
     /// spin).
     pub count: u32,
@@ -113,7 +162,7 @@ pub struct SpinPrior {
 impl Default for SpinPrior {
     fn default() -> Self {
         let bin = Bin { seen: [None; BIN_MEMORY], next: 0, scale: 1.0, share: SHARE_START };
-        SpinPrior { bins: [bin; SPIN_BINS], count: 0 }
+        SpinPrior { bins: [bin; SPIN_BINS], by_speed: [None; SPEED_MEMORY], by_speed_next: 0, count: 0 }
     }
 }
 
@@ -138,6 +187,58 @@ impl SpinPrior {
     /// its logarithm (the filter's [`super::ekf::EkfNoise::bounce_spin_share`]).
     pub fn share_at(&self, s: f64) -> f64 {
         self.interpolate(s, |b| b.share)
+    }
+
+    /// The scale and spread ([`Self::scale_at`], [`Self::share_at`]) for
+    /// one ball as its flight shows it: the bin's, weighed against the
+    /// spin that balls of its speed and lift direction came with, where
+    /// enough such balls were read. A launcher's spin grows with its
+    /// speed, as a player's does; where the lift saturates, a ball's
+    /// speed tells its spin better than its flight.
+    pub fn ball_scale(&self, state: &BallState, radius: f64) -> (f64, f64) {
+        let s = spin_parameter(state, radius);
+        let (k, share) = (self.scale_at(s), self.share_at(s));
+        let w = state.spin.norm();
+        let Some((mean, spread)) = self.spin_by_speed(state) else { return (k, share) };
+        if !(w > 0.0 && w.is_finite()) {
+            return (k, share);
+        }
+        // Inverse-variance weighting in ln(spin).
+        let (a, b) = (1.0 / (share * share), 1.0 / (spread * spread));
+        let ln_w = ((w * k).ln() * a + mean * b) / (a + b);
+        let k = (ln_w.exp() / w).clamp(grid(0), grid(SCALE_GRID - 1));
+        (k, (1.0 / (a + b)).sqrt())
+    }
+
+    /// The mean and σ of ln(spin) of the balls of `state`'s speed and
+    /// lift direction, kernel-weighted in ln(speed); `None` with too few.
+    fn spin_by_speed(&self, state: &BallState) -> Option<(f64, f64)> {
+        let (ln_v, class) = (state.vel.norm().ln(), lift_class(state));
+        let (mut sw, mut sx, mut sxx) = (0.0, 0.0, 0.0);
+        for seen in self.by_speed.iter().flatten().filter(|b| b.class == class) {
+            let w = (-0.5 * ((seen.ln_speed - ln_v) / SPEED_KERNEL).powi(2)).exp();
+            sw += w;
+            sx += w * seen.ln_spin;
+            sxx += w * seen.ln_spin * seen.ln_spin;
+        }
+        if sw.is_nan() || sw < SPEED_MIN_WEIGHT {
+            return None;
+        }
+        let mean = sx / sw;
+        let var = (sxx / sw - mean * mean).max(0.0);
+        // The spread of alike balls, and the mean's own uncertainty.
+        Some((mean, (var * (1.0 + 1.0 / sw)).sqrt().max(SPEED_SHARE_FLOOR)))
+    }
+
+    fn remember_spin(&mut self, flight: &BallState, scale: f64) {
+        let w = flight.spin.norm() * scale;
+        let v = flight.vel.norm();
+        if !(w > 0.0 && w.is_finite() && v > 0.0 && v.is_finite()) {
+            return;
+        }
+        self.by_speed[self.by_speed_next] =
+            Some(SpinSeen { ln_speed: v.ln(), class: lift_class(flight), ln_spin: w.ln() });
+        self.by_speed_next = (self.by_speed_next + 1) % SPEED_MEMORY;
     }
 
     fn interpolate(&self, s: f64, of: impl Fn(&Bin) -> f64) -> f64 {
@@ -174,7 +275,9 @@ impl SpinPrior {
         if fitting(&seen.costs(&table)).0 == 0 {
             return false;
         }
+        let own = own_scale(&seen.costs(&table), self.scale_at(spin_parameter(before, table.radius)));
         self.keep(seen, spin_parameter(before, table.radius), &table);
+        self.remember_spin(before, own);
         true
     }
 
@@ -190,6 +293,7 @@ impl SpinPrior {
         }
         let table = table.with_spin_scale(1.0);
         self.keep(Seen::Logo { ln_scale: scale.ln(), sigma }, spin_parameter(flight, table.radius), &table);
+        self.remember_spin(flight, scale);
         true
     }
 
@@ -218,11 +322,8 @@ impl SpinPrior {
         let (mut sum, mut n) = (0.0, 0usize);
         for c in costs.iter().flatten() {
             let (lo, hi) = fitting(c);
-            let (own, open) = if hi == SCALE_GRID - 1 {
-                (grid(lo).max(bin.scale), 0.0)
-            } else {
-                ((grid(lo) * grid(hi)).sqrt(), 0.5 * (grid(hi) / grid(lo)).ln())
-            };
+            let own = own_scale(c, bin.scale);
+            let open = if hi == SCALE_GRID - 1 { 0.0 } else { 0.5 * (grid(hi) / grid(lo)).ln() };
             sum += (own / bin.scale).ln().powi(2) - open * open;
             n += 1;
         }
@@ -266,6 +367,29 @@ mod tests {
         assert_eq!(prior.count, 20);
         assert!((prior.scale_at(0.3) - (1.0 + 0.5 * (s[2] - 1.0))).abs() < 1e-9);
         assert_eq!(prior.scale_at(5.0), 1.0);
+    }
+
+    /// The camera read topspin balls at 8 m/s at 600 rad/s whose flights
+    /// showed 300: a new ball of that speed and lift whose flight shows
+    /// 250 is taken at close to 600, more surely than its bin alone says;
+    /// a ball as fast with backspin, or a slower one, keeps its bin's.
+    #[test]
+    fn a_balls_speed_tells_its_spin() {
+        let table = BounceModel::new(0.92, 0.2, R);
+        let at = |v: f64, w: f64| BallState::new(Vec3::zeros(), Vec3::new(v, 0.0, -2.0), Vec3::new(0.0, w, 0.0));
+        let mut prior = SpinPrior::default();
+        let before = prior.ball_scale(&at(8.0, 250.0), R);
+        for k in 0..6 {
+            assert!(prior.take_logo(&at(8.0 + 0.05 * k as f64, 300.0), 2.0, 0.05, &table));
+        }
+        let (k, share) = prior.ball_scale(&at(8.0, 250.0), R);
+        let (bin_k, bin_share) = (prior.scale_at(spin_parameter(&at(8.0, 250.0), R)), prior.share_at(0.6));
+        assert!((250.0 * k - 600.0).abs() < 0.1 * 600.0 && share < bin_share, "×{k} σ {share}; bin ×{bin_k}");
+        assert_eq!(before.0, 1.0);
+        let back = at(8.0, -250.0);
+        assert_eq!(prior.ball_scale(&back, R).0, prior.scale_at(spin_parameter(&back, R)));
+        let slow = at(5.0, 250.0);
+        assert_eq!(prior.ball_scale(&slow, R).0, prior.scale_at(spin_parameter(&slow, R)));
     }
 
     /// Fast topspin that slides at the contact, shown at a third of its
