@@ -290,6 +290,9 @@ struct Track {
     /// The spin the ceiling camera read (rad/s, table frame) and the σ of
     /// the ln of its scale against the flight's reading, once fused.
     logo: Option<(Vec3, f64)>,
+    /// Speed at the first sample of the track, m/s: what the session's
+    /// spin prior weighs alike balls by (the same point of every flight).
+    speed0: f64,
 }
 
 /// A logo spin more than this far from the flight's own spin direction is
@@ -455,7 +458,7 @@ impl Estimator {
             self.session.take_bounce_residual(&residual, &explained, &cfg);
             if cfg.spin {
                 let read = track.ekf.contact_vel_var_read + Vec3::repeat(after_var);
-                self.session.spin.take(&before, &after, &read, &plain);
+                self.session.spin.take(&before, &after, &read, &plain, track.speed0);
             }
             // The table, from the spin it met.
             let met = crate::physics::BallState { spin: before.spin * self.session.spin.scale_at(s_shown), ..before };
@@ -532,7 +535,7 @@ impl Estimator {
             // (`track_step`), against the filter's spin as it is then.
             track.logo = Some((m.spin, sigma));
             if self.cfg.learn.enabled && self.cfg.learn.spin {
-                self.session.spin.take_logo(&flight, k, sigma, &self.prop.bounce);
+                self.session.spin.take_logo(&flight, k, sigma, &self.prop.bounce, track.speed0);
             }
         }
         Some(EstimatorEvent::LogoSpin { trajectory: track.id, t: track.last_t, accepted, d2 })
@@ -606,7 +609,7 @@ impl Estimator {
         ekf.p.fixed_view_mut::<3, 3>(6, 6).copy_from(&spin_cov);
         let mut prop = self.session_propagator();
         if self.cfg.learn.enabled && self.cfg.learn.spin {
-            let (k, share) = self.session.spin.ball_scale(&ekf.state(), prop.bounce.radius);
+            let (k, share) = self.session.spin.ball_scale(&ekf.state(), prop.bounce.radius, state.vel.norm());
             prop.bounce = prop.bounce.with_spin_scale(k);
             ekf.noise.bounce_spin_share = share;
         }
@@ -637,6 +640,7 @@ impl Estimator {
             hit_x: None,
             target: self.strike.aim_target_for(id, inliers[0].pos.y),
             logo: None,
+            speed0: state.vel.norm(),
         });
         out.push(EstimatorEvent::Started { trajectory: id, t: last.t, start_outliers: outliers.len() as u8 });
         self.plan(last.t, out);
@@ -658,7 +662,7 @@ impl Estimator {
                 track.prop.bounce = track.prop.bounce.with_spin_scale(k);
                 track.ekf.noise.bounce_spin_share = sigma;
             } else if cfg.learn.enabled && cfg.learn.spin {
-                let (k, share) = self.session.spin.ball_scale(&state, self.prop.bounce.radius);
+                let (k, share) = self.session.spin.ball_scale(&state, self.prop.bounce.radius, track.speed0);
                 track.prop.bounce = track.prop.bounce.with_spin_scale(k);
                 track.ekf.noise.bounce_spin_share = share;
             }

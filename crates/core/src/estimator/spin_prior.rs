@@ -190,16 +190,17 @@ impl SpinPrior {
     }
 
     /// The scale and spread ([`Self::scale_at`], [`Self::share_at`]) for
-    /// one ball as its flight shows it: the bin's, weighed against the
-    /// spin that balls of its speed and lift direction came with, where
+    /// one ball as its flight shows it (`speed`: at the first sample of
+    /// its track): the bin's, weighed against the spin that balls of that
+    /// speed and its lift direction came with, where
     /// enough such balls were read. A launcher's spin grows with its
     /// speed, as a player's does; where the lift saturates, a ball's
     /// speed tells its spin better than its flight.
-    pub fn ball_scale(&self, state: &BallState, radius: f64) -> (f64, f64) {
+    pub fn ball_scale(&self, state: &BallState, radius: f64, speed: f64) -> (f64, f64) {
         let s = spin_parameter(state, radius);
         let (k, share) = (self.scale_at(s), self.share_at(s));
         let w = state.spin.norm();
-        let Some((mean, spread)) = self.spin_by_speed(state) else { return (k, share) };
+        let Some((mean, spread)) = self.spin_by_speed(state, speed) else { return (k, share) };
         if !(w > 0.0 && w.is_finite()) {
             return (k, share);
         }
@@ -212,8 +213,8 @@ impl SpinPrior {
 
     /// The mean and σ of ln(spin) of the balls of `state`'s speed and
     /// lift direction, kernel-weighted in ln(speed); `None` with too few.
-    fn spin_by_speed(&self, state: &BallState) -> Option<(f64, f64)> {
-        let (ln_v, class) = (state.vel.norm().ln(), lift_class(state));
+    fn spin_by_speed(&self, state: &BallState, speed: f64) -> Option<(f64, f64)> {
+        let (ln_v, class) = (speed.ln(), lift_class(state));
         let (mut sw, mut sx, mut sxx) = (0.0, 0.0, 0.0);
         for seen in self.by_speed.iter().flatten().filter(|b| b.class == class) {
             let w = (-0.5 * ((seen.ln_speed - ln_v) / SPEED_KERNEL).powi(2)).exp();
@@ -230,9 +231,8 @@ impl SpinPrior {
         Some((mean, (var * (1.0 + 1.0 / sw)).sqrt().max(SPEED_SHARE_FLOOR)))
     }
 
-    fn remember_spin(&mut self, flight: &BallState, scale: f64) {
+    fn remember_spin(&mut self, flight: &BallState, scale: f64, v: f64) {
         let w = flight.spin.norm() * scale;
-        let v = flight.vel.norm();
         if !(w > 0.0 && w.is_finite() && v > 0.0 && v.is_finite()) {
             return;
         }
@@ -264,7 +264,9 @@ impl SpinPrior {
     /// (true), and that bin's scale found anew. `var` holds the flight's
     /// own uncertainty through the contact (not the bin's spread), so that
     /// what fits one kick is what the reading and the tracker leave open.
-    pub fn take(&mut self, before: &BallState, after: &Vec3, var: &Vec3, table: &BounceModel) -> bool {
+    /// `speed`: the ball's at the first sample of its track
+    /// ([`Self::ball_scale`]).
+    pub fn take(&mut self, before: &BallState, after: &Vec3, var: &Vec3, table: &BounceModel, speed: f64) -> bool {
         let seen = Seen::Bounce { before: *before, after: *after, var: *var };
         let table = table.with_spin_scale(1.0);
         if table.radius * before.spin.x.hypot(before.spin.y) < MIN_SURFACE_SPEED {
@@ -272,28 +274,30 @@ impl SpinPrior {
         }
         // Every scale down to the grid's least fits: the kick does not
         // depend on the spin (a backspin ball slides whatever it has).
-        if fitting(&seen.costs(&table)).0 == 0 {
+        let costs = seen.costs(&table);
+        if fitting(&costs).0 == 0 {
             return false;
         }
-        let own = own_scale(&seen.costs(&table), self.scale_at(spin_parameter(before, table.radius)));
+        let own = own_scale(&costs, self.scale_at(spin_parameter(before, table.radius)));
         self.keep(seen, spin_parameter(before, table.radius), &table);
-        self.remember_spin(before, own);
+        self.remember_spin(before, own, speed);
         true
     }
 
     /// Takes one ball whose spin the ceiling camera read: `flight` its
     /// state as the flight showed it, `scale` the logo's spin per unit of
     /// the flight's (its σ in ln: `sigma`), `table` the session's table.
-    /// Kept in the bin of the flight's spin parameter, as a bounce is;
-    /// false (nothing kept) for a scale off the grid or not finite.
-    pub fn take_logo(&mut self, flight: &BallState, scale: f64, sigma: f64, table: &BounceModel) -> bool {
+    /// Kept in the bin of the flight's spin parameter, as a bounce is, and
+    /// with `speed` as [`Self::take`] keeps it; false (nothing kept) for a
+    /// scale off the grid or not finite.
+    pub fn take_logo(&mut self, flight: &BallState, scale: f64, sigma: f64, table: &BounceModel, speed: f64) -> bool {
         let usable = scale.is_finite() && sigma.is_finite() && sigma > 0.0;
         if !(usable && (grid(0)..=grid(SCALE_GRID - 1)).contains(&scale)) {
             return false;
         }
         let table = table.with_spin_scale(1.0);
         self.keep(Seen::Logo { ln_scale: scale.ln(), sigma }, spin_parameter(flight, table.radius), &table);
-        self.remember_spin(flight, scale);
+        self.remember_spin(flight, scale, speed);
         true
     }
 
@@ -354,7 +358,7 @@ mod tests {
         let mut prior = SpinPrior::default();
         for k in 0..20 {
             let truth = 200.0 + k as f64;
-            assert!(prior.take(&shown(0.5 * truth), &table.apply(&shown(truth)).vel, &var, &table));
+            assert!(prior.take(&shown(0.5 * truth), &table.apply(&shown(truth)).vel, &var, &table, 5.83));
         }
         // S shown: 0.02·105/5.83 = 0.36, the bin at 0.4.
         let s = prior.scales();
@@ -363,7 +367,7 @@ mod tests {
         let shares = prior.shares();
         assert!(shares[2] < 0.1 && [shares[0], shares[1], shares[3]] == [SHARE_START; 3], "{shares:?}");
         assert_eq!((s[0], s[1], s[3]), (1.0, 1.0, 1.0));
-        assert!(!prior.take(&shown(-150.0), &table.apply(&shown(-300.0)).vel, &var, &table));
+        assert!(!prior.take(&shown(-150.0), &table.apply(&shown(-300.0)).vel, &var, &table, 5.83));
         assert_eq!(prior.count, 20);
         assert!((prior.scale_at(0.3) - (1.0 + 0.5 * (s[2] - 1.0))).abs() < 1e-9);
         assert_eq!(prior.scale_at(5.0), 1.0);
@@ -378,18 +382,19 @@ mod tests {
         let table = BounceModel::new(0.92, 0.2, R);
         let at = |v: f64, w: f64| BallState::new(Vec3::zeros(), Vec3::new(v, 0.0, -2.0), Vec3::new(0.0, w, 0.0));
         let mut prior = SpinPrior::default();
-        let before = prior.ball_scale(&at(8.0, 250.0), R);
+        let before = prior.ball_scale(&at(8.0, 250.0), R, 8.0);
         for k in 0..6 {
-            assert!(prior.take_logo(&at(8.0 + 0.05 * k as f64, 300.0), 2.0, 0.05, &table));
+            let v = 8.0 + 0.05 * k as f64;
+            assert!(prior.take_logo(&at(v, 300.0), 2.0, 0.05, &table, v));
         }
-        let (k, share) = prior.ball_scale(&at(8.0, 250.0), R);
+        let (k, share) = prior.ball_scale(&at(8.0, 250.0), R, 8.0);
         let (bin_k, bin_share) = (prior.scale_at(spin_parameter(&at(8.0, 250.0), R)), prior.share_at(0.6));
         assert!((250.0 * k - 600.0).abs() < 0.1 * 600.0 && share < bin_share, "×{k} σ {share}; bin ×{bin_k}");
         assert_eq!(before.0, 1.0);
         let back = at(8.0, -250.0);
-        assert_eq!(prior.ball_scale(&back, R).0, prior.scale_at(spin_parameter(&back, R)));
+        assert_eq!(prior.ball_scale(&back, R, 8.0).0, prior.scale_at(spin_parameter(&back, R)));
         let slow = at(5.0, 250.0);
-        assert_eq!(prior.ball_scale(&slow, R).0, prior.scale_at(spin_parameter(&slow, R)));
+        assert_eq!(prior.ball_scale(&slow, R, 5.0).0, prior.scale_at(spin_parameter(&slow, R)));
     }
 
     /// Fast topspin that slides at the contact, shown at a third of its
@@ -402,7 +407,7 @@ mod tests {
         let mut prior = SpinPrior::default();
         let after = table.apply(&shown(600.0)).vel;
         for _ in 0..8 {
-            prior.take(&shown(200.0), &after, &var, &table);
+            prior.take(&shown(200.0), &after, &var, &table, 5.83);
         }
         // S shown 0.69: kept in the bin at 0.8.
         let m = prior.scales()[3];
@@ -418,11 +423,11 @@ mod tests {
         let mut prior = SpinPrior::default();
         for k in 0..12 {
             let truth = 200.0 + k as f64;
-            prior.take(&shown(0.5 * truth), &table.apply(&shown(truth)).vel, &var, &table);
+            prior.take(&shown(0.5 * truth), &table.apply(&shown(truth)).vel, &var, &table, 5.83);
         }
         let good = prior.scales()[2];
         let wild = table.apply(&shown(200.0)).vel + Vec3::new(-1.5, 0.8, 0.0);
-        prior.take(&shown(100.0), &wild, &var, &table);
+        prior.take(&shown(100.0), &wild, &var, &table, 5.83);
         assert!((prior.scales()[2] - good).abs() < 0.1 * good, "{good} → {:?}", prior.scales());
     }
 
@@ -435,7 +440,7 @@ mod tests {
         let table = BounceModel::new(0.92, 0.2, R);
         let mut prior = SpinPrior::default();
         for k in 0..8 {
-            assert!(prior.take_logo(&shown(250.0 + k as f64), 2.0, 0.05, &table));
+            assert!(prior.take_logo(&shown(250.0 + k as f64), 2.0, 0.05, &table, 5.83));
         }
         // S shown: 0.02·250/5.83 = 0.86, the bin at 0.8.
         let s = prior.scales();
@@ -444,7 +449,7 @@ mod tests {
         assert!(prior.shares()[3] <= 0.1, "{:?}", prior.shares());
         assert_eq!(prior.count, 8);
         for (scale, sigma) in [(8.0, 0.05), (0.2, 0.05), (f64::NAN, 0.05), (2.0, 0.0), (2.0, f64::INFINITY)] {
-            assert!(!prior.take_logo(&shown(250.0), scale, sigma, &table), "{scale} {sigma}");
+            assert!(!prior.take_logo(&shown(250.0), scale, sigma, &table, 5.83), "{scale} {sigma}");
         }
         assert_eq!(prior.count, 8);
     }
