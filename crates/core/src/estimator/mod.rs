@@ -219,6 +219,9 @@ pub enum EstimatorEvent {
         /// per bin of the flight's spin parameter
         /// ([`spin_prior::SPIN_BIN_CENTRES`]): the next balls' spin prior.
         spin_scale: [f32; spin_prior::SPIN_BINS],
+        /// Balls whose own spin the session keeps with their speed and
+        /// lift direction ([`SpinPrior::ball_scale`]).
+        spin_by_speed: u8,
     },
     /// A bounce no table explains (a net-cord ball, the table's edge, a
     /// tracker jump at the bounce): the session learned nothing from it.
@@ -471,6 +474,7 @@ impl Estimator {
                 friction: s.friction.value as f32,
                 bounce_sigma: s.bounce_noise().map(|v| v.sqrt() as f32).into(),
                 spin_scale: s.spin.scales().map(|v| v as f32),
+                spin_by_speed: s.spin.kept_by_speed() as u8,
             });
         }
     }

@@ -172,6 +172,12 @@ impl SpinPrior {
         self.bins.map(|b| b.scale)
     }
 
+    /// How many balls' own spin is kept with their speed (at most
+    /// [`SPEED_MEMORY`]).
+    pub fn kept_by_speed(&self) -> usize {
+        self.by_speed.iter().flatten().count()
+    }
+
     /// Each bin's spread: σ of ln(scale) of one ball about the bin's.
     pub fn shares(&self) -> [f64; SPIN_BINS] {
         self.bins.map(|b| b.share)
@@ -387,6 +393,7 @@ mod tests {
             let v = 8.0 + 0.05 * k as f64;
             assert!(prior.take_logo(&at(v, 300.0), 2.0, 0.05, &table, v));
         }
+        assert_eq!(prior.kept_by_speed(), 6);
         let (k, share) = prior.ball_scale(&at(8.0, 250.0), R, 8.0);
         let (bin_k, bin_share) = (prior.scale_at(spin_parameter(&at(8.0, 250.0), R)), prior.share_at(0.6));
         assert!((250.0 * k - 600.0).abs() < 0.1 * 600.0 && share < bin_share, "×{k} σ {share}; bin ×{bin_k}");
