@@ -198,10 +198,10 @@ impl SpinPrior {
     /// The scale and spread ([`Self::scale_at`], [`Self::share_at`]) for
     /// one ball as its flight shows it (`speed`: at the first sample of
     /// its track): the bin's, weighed against the spin that balls of that
-    /// speed and its lift direction came with, where
-    /// enough such balls were read. A launcher's spin grows with its
-    /// speed, as a player's does; where the lift saturates, a ball's
-    /// speed tells its spin better than its flight.
+    /// speed and its lift direction came with, where enough such balls
+    /// were read. A launcher's spin grows with its speed, as a player's
+    /// does; where the lift saturates, a ball's speed tells its spin
+    /// better than its flight.
     pub fn ball_scale(&self, state: &BallState, radius: f64, speed: f64) -> (f64, f64) {
         let s = spin_parameter(state, radius);
         let (k, share) = (self.scale_at(s), self.share_at(s));
