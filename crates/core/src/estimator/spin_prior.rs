@@ -206,10 +206,10 @@ impl SpinPrior {
         let s = spin_parameter(state, radius);
         let (k, share) = (self.scale_at(s), self.share_at(s));
         let w = state.spin.norm();
-        let Some((mean, spread)) = self.spin_by_speed(state, speed) else { return (k, share) };
         if !(w > 0.0 && w.is_finite()) {
             return (k, share);
         }
+        let Some((mean, spread)) = self.spin_by_speed(state, speed) else { return (k, share) };
         // Inverse-variance weighting in ln(spin).
         let (a, b) = (1.0 / (share * share), 1.0 / (spread * spread));
         let ln_w = ((w * k).ln() * a + mean * b) / (a + b);
@@ -284,8 +284,9 @@ impl SpinPrior {
         if fitting(&costs).0 == 0 {
             return false;
         }
-        let own = own_scale(&costs, self.scale_at(spin_parameter(before, table.radius)));
-        self.keep(seen, spin_parameter(before, table.radius), &table);
+        let s = spin_parameter(before, table.radius);
+        let own = own_scale(&costs, self.scale_at(s));
+        self.keep(seen, s, &table);
         self.remember_spin(before, own, speed);
         true
     }
@@ -395,7 +396,8 @@ mod tests {
         }
         assert_eq!(prior.kept_by_speed(), 6);
         let (k, share) = prior.ball_scale(&at(8.0, 250.0), R, 8.0);
-        let (bin_k, bin_share) = (prior.scale_at(spin_parameter(&at(8.0, 250.0), R)), prior.share_at(0.6));
+        let s = spin_parameter(&at(8.0, 250.0), R);
+        let (bin_k, bin_share) = (prior.scale_at(s), prior.share_at(s));
         assert!((250.0 * k - 600.0).abs() < 0.1 * 600.0 && share < bin_share, "×{k} σ {share}; bin ×{bin_k}");
         assert_eq!(before.0, 1.0);
         let back = at(8.0, -250.0);
