@@ -282,6 +282,16 @@ pub fn table(r: &DemoReport) -> String {
             "timing tolerance of the returns (median): the same strokes return the ball {early} earlier to {late} \
              later"
         );
+        // The window's grid spans one doubling either way: at its ends,
+        // "at most" and "at least".
+        let [less, more] = r.spin_tolerance_median;
+        let less = format!("{}×{less:.2}", if less <= 0.5 + 1e-9 { "≤ " } else { "" });
+        let more = format!("{}×{more:.2}", if more >= 2.0 - 1e-9 { "≥ " } else { "" });
+        let _ = writeln!(
+            out,
+            "spin tolerance of the returns (median): the same strokes return the ball with {less} to {more} of its \
+             spin"
+        );
     }
     let _ = writeln!(
         out,

@@ -217,6 +217,10 @@ pub struct DemoReport {
     /// still been returned by the same strokes, ms (medians; each side
     /// capped at [`crate::returns::TIMING_SPAN_MS`]).
     pub timing_tolerance_ms_median: [f64; 2],
+    /// The least and most spin, as multiples of each returned ball's true
+    /// spin at the contact, with which the same strokes still return it
+    /// (medians; [`crate::returns::spin_window`], ×0.5 to ×2 at most).
+    pub spin_tolerance_median: [f64; 2],
     /// The daemon's latency percentiles (RSI answer, observation to plan), µs.
     pub latency_us: Latencies,
     /// The RSI loop ended with the bat home (or no robot was there).
@@ -617,6 +621,9 @@ fn judge(
     let hit_err: Vec<f64> = reach.iter().filter_map(|b| b.hit_err_mm).collect();
     let windows: Vec<[f64; 2]> = reach.iter().filter(|b| b.returned).filter_map(|b| b.timing_window_ms).collect();
     let tolerance = |side: fn(&[f64; 2]) -> f64| Summary::of(&windows.iter().map(side).collect::<Vec<_>>()).median;
+    let spins: Vec<[f64; 2]> =
+        reach.iter().filter(|b| b.returned).filter_map(|b| b.contact.and_then(|c| c.spin_window)).collect();
+    let spin_end = |end: usize| Summary::of(&spins.iter().map(|w| w[end]).collect::<Vec<_>>()).median;
     DemoReport {
         balls: balls.len(),
         reachable: reach.len(),
@@ -638,6 +645,7 @@ fn judge(
         spin_err_pct_median: Summary::of(&spin).median,
         hit_err_mm_median: Summary::of(&hit_err).median,
         timing_tolerance_ms_median: [tolerance(|w| -w[0]), tolerance(|w| w[1])],
+        spin_tolerance_median: [spin_end(0), spin_end(1)],
         latency_us: Latencies::of(&summary.telemetry),
         ended_home: summary.ended_home,
         plans_late: summary.telemetry.plans_late,

@@ -107,6 +107,10 @@ pub struct ContactReport {
     pub spin_out_rps: [f64; 3],
     /// How the rubber held the ball.
     pub regime: Regime,
+    /// The multiples of the ball's true spin at the contact (on a grid
+    /// from ×0.5 to ×2) over which the same bat there returns it
+    /// ([`spin_window`]): the stroke's tolerance to the spin's size.
+    pub spin_window: Option<[f64; 2]>,
 }
 
 /// The verdict on one ball's return.
@@ -346,6 +350,29 @@ fn returning_tilts(prop: &Propagator, racket: &RacketModel, ball: &BallState, ba
     nearest_run(&tilts, actual)
 }
 
+/// Steps of the spin window's grid per doubling of the spin (either way
+/// from the ball's own, one doubling).
+const SPIN_STEPS_PER_DOUBLING: i32 = 10;
+
+/// The stroke's spin window: the run of multiples 2^(k/10), k in −10..=10
+/// ([`SPIN_STEPS_PER_DOUBLING`]), of `ball`'s spin (the state at the contact, `t` s after launch) with
+/// which the same `bat` returns it, nearest ×1 — its ends are how much
+/// less and more spin the stroke forgives. The ball's position and
+/// velocity at the contact are held (the spin's effect on the arrival is
+/// the timing window's); `None`: no multiple returns it.
+pub fn spin_window(prop: &Propagator, racket: &RacketModel, ball: &BallState, bat: &Bat, t: f64) -> Option<[f64; 2]> {
+    let n = bat.normal;
+    let v_s = bat.surface_velocity(&(ball.pos - n * racket.radius));
+    let returns = |k: i32| {
+        let scaled =
+            BallState { spin: ball.spin * 2f64.powf(f64::from(k) / f64::from(SPIN_STEPS_PER_DOUBLING)), ..*ball };
+        racket.hit(&scaled, &n, &v_s).is_some_and(|i| fly_return(prop, &i.after, t).0.is_none())
+    };
+    let steps: Vec<(f64, bool)> =
+        (-SPIN_STEPS_PER_DOUBLING..=SPIN_STEPS_PER_DOUBLING).map(|k| (f64::from(k), returns(k))).collect();
+    nearest_run(&steps, 0.0).map(|r| r.map(|k| 2f64.powf(k / f64::from(SPIN_STEPS_PER_DOUBLING))))
+}
+
 /// How far the ball's arrival is shifted at most when a stroke's timing
 /// window is measured, ms (either way).
 pub const TIMING_SPAN_MS: i64 = 30;
@@ -497,6 +524,7 @@ pub fn judge_return(
         ball_out_mps: after.vel.norm(),
         spin_out_rps: after.spin.map(topspin_core::physics::rad_to_rps).into(),
         regime: impact.regime,
+        spin_window: spin_window(prop, &racket, &touch.ball, bat, touch.t),
     };
     ReturnJudgement { fail, contact: Some(contact), landing, after: Some((touch.t, after)), why }
 }
@@ -647,5 +675,25 @@ mod tests {
         assert!(why.starts_with("angle") && why.contains("too open"), "{why}");
         let [lo, hi] = j.contact.unwrap().returning_tilt_deg.expect("some tilt returns it");
         assert!(lo <= o.b.to_degrees() + 1.0 && o.b.to_degrees() - 1.0 <= hi, "{lo}…{hi} vs {}", o.b.to_degrees());
+    }
+
+    #[test]
+    fn the_spin_window_is_the_spin_the_stroke_was_aimed_for() {
+        let cal = Calibration::default_cell();
+        let (launch, s, t_hit) = ball(&cal);
+        let window = |aimed_for: &BallState| {
+            let (o, v) = aimed(&cal, aimed_for);
+            let p = path(t_hit, o, |dt| s.pos + v * dt);
+            let j = judge_return(&cal, &cal.propagator(), &launch, START, t_hit, &p);
+            let w = j.contact.and_then(|c| c.spin_window).expect("some spin returns it");
+            assert_eq!(j.returned(), w[0] <= 1.0 && 1.0 <= w[1], "{w:?} {j:?}");
+            w
+        };
+        // Aimed for the ball itself: its own spin is inside.
+        let [lo, hi] = window(&s);
+        assert!(lo < 1.0 && 1.0 < hi, "{lo}…{hi}");
+        // Aimed for half again its spin: the window moves up with it.
+        let [lo, hi] = window(&BallState { spin: s.spin * 1.5, ..s });
+        assert!(lo <= 1.5 && 1.5 <= hi && lo > 1.0, "{lo}…{hi}");
     }
 }

@@ -193,6 +193,9 @@ fn returns_over_seeds() {
     // and failed balls a shifted arrival would have returned.
     let mut tolerance = std::collections::BTreeMap::<String, (Vec<f64>, Vec<f64>)>::new();
     let mut mistimed = 0;
+    // Spin tolerance of the returns per setting: how much less and more
+    // spin (× the true spin at the contact) the same strokes return.
+    let mut spin_tolerance = std::collections::BTreeMap::<String, (Vec<f64>, Vec<f64>)>::new();
     for &seed in &seeds {
         let mut cfg = DemoConfig { balls, seed, world: world.clone(), strokes, ..DemoConfig::default() };
         if let Ok(c) = std::env::var("CORRECTION") {
@@ -226,11 +229,16 @@ fn returns_over_seeds() {
                 t.0.push(-lo);
                 t.1.push(hi);
             }
+            if let (true, Some([lo, hi])) = (b.returned, b.contact.and_then(|c| c.spin_window)) {
+                let t = spin_tolerance.entry(b.setting.clone()).or_default();
+                t.0.push(lo);
+                t.1.push(hi);
+            }
             if !(b.hit && b.returned) {
                 mistimed += b.timing_window_ms.is_some() as usize;
                 eprintln!(
                     "seed {seed} ball {:2} {:15} spin {:?} rps, read {:?}; miss {:.1} mm, plan {:+.1} ms, returned \
-                     by arrival shifts {:?} ms; {} {}",
+                     by arrival shifts {:?} ms, by spins ×{:?}; {} {}",
                     b.ball,
                     b.setting,
                     b.true_spin_rps.map(|v| v.round()),
@@ -238,6 +246,7 @@ fn returns_over_seeds() {
                     b.hit_err_mm.unwrap_or(f64::NAN),
                     b.plan_dt_ms.unwrap_or(f64::NAN),
                     b.timing_window_ms,
+                    b.contact.and_then(|c| c.spin_window).map(|w| w.map(|k| (k * 100.0).round() / 100.0)),
                     b.return_fail.map_or("returned", |f| f.name()),
                     b.return_why.as_deref().unwrap_or("")
                 );
@@ -264,6 +273,14 @@ fn returns_over_seeds() {
             early.len(),
             median(early),
             median(late)
+        );
+    }
+    for (name, (less, more)) in &mut spin_tolerance {
+        eprintln!(
+            "{name:16} spin tolerance of {:4} returns: ×{:.2} to ×{:.2} of the true spin (medians)",
+            less.len(),
+            median(less),
+            median(more)
         );
     }
     eprintln!(
