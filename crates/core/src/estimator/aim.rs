@@ -25,6 +25,16 @@
 //! for the same ball (its face, speed and Jacobian): an unconverged aim is
 //! the best face found so far, a refinement usually costs one or two
 //! flights, and none when the prediction has hardly moved.
+//!
+//! A search climbs to a faster bat, and moves its target back, for the
+//! prediction it had then; when the prediction moves (a spin estimate
+//! that jumps, the camera's spin arriving) that bat and target can stay
+//! where no face lands the ball. So [`Searches`] runs a fresh search for
+//! the latest prediction beside any search that has climbed, and takes
+//! it over once it lands the ball with a slower bat (or the other has
+//! not landed it at all). One that lands it no better, or climbs as far
+//! without landing it, gives way; another starts when the prediction has
+//! moved on ([`FRESH_AGAIN`]). At most twice the plan's budget of flights.
 
 use crate::calib::StrikeCalib;
 use crate::motion::reach::{ReachMap, SpeedCaps};
@@ -116,6 +126,75 @@ pub struct Aim {
     /// Until it has: the nearest clear landing so far (miss, face, speed
     /// step, landing).
     best: Option<(f64, [f64; 2], usize, Landing)>,
+}
+
+/// The aim of one ball across its plans: the search the plans resume
+/// and, where that one has climbed to a faster bat or moved its target
+/// back, a fresh search for the latest prediction beside it.
+#[derive(Copy, Clone, Debug, Default, PartialEq)]
+pub struct Searches {
+    /// The search whose face the plans send.
+    pub current: Option<Aim>,
+    /// The fresh one, while there is one.
+    fresh: Option<Aim>,
+    /// The ball the latest fresh search began for: another begins once
+    /// the prediction has moved [`FRESH_AGAIN`] times the re-aim bounds
+    /// from it.
+    fresh_for: Option<BallState>,
+}
+
+/// How far, in multiples of the re-aim bounds (`REAIM_*`), the prediction
+/// moves before a fresh search that gave way is tried again: 10–30 cm of
+/// landing.
+const FRESH_AGAIN: f64 = 10.0;
+
+impl Searches {
+    /// Aims `ball` as [`aim`] does, resuming the current search; where
+    /// that one has climbed (a faster bat than the slowest, or a target
+    /// moved back from `target`), also resumes or starts the fresh
+    /// search, each within `budget` flights, and takes the fresh one
+    /// over once it lands the ball with a slower bat, or the current
+    /// one has not landed it.
+    #[allow(clippy::too_many_arguments)]
+    pub fn step(
+        &mut self,
+        bounds: &AimBounds,
+        target: [f64; 2],
+        prop: &Propagator,
+        racket: &RacketModel,
+        ball: &BallState,
+        tilt0: f64,
+        budget: usize,
+    ) -> Aim {
+        let mut a = aim(bounds, target, prop, racket, ball, tilt0, self.current.as_ref(), budget);
+        if a.level == 0 && a.target == target {
+            *self = Searches { current: Some(a), ..Searches::default() };
+            return a;
+        }
+        let again = self.fresh_for.is_none_or(|b| !near(&b, ball, FRESH_AGAIN));
+        if self.fresh.is_none() && again {
+            self.fresh_for = Some(*ball);
+        }
+        if self.fresh.is_some() || again {
+            let f = aim(bounds, target, prop, racket, ball, tilt0, self.fresh.as_ref(), budget);
+            let flights = a.flights + f.flights;
+            // It takes over where it lands the ball with a slower bat (or
+            // the other has not landed it); it gives way where it lands it
+            // no better, or climbs as far without landing it.
+            let (takes_over, gives_way) = if f.converged {
+                (!a.converged || f.speed_step < a.speed_step, true)
+            } else {
+                (false, f.level >= a.level)
+            };
+            if takes_over {
+                a = f;
+            }
+            self.fresh = (!gives_way).then_some(f);
+            a.flights = flights;
+        }
+        self.current = Some(a);
+        a
+    }
 }
 
 /// The face's outward normal for tilt θ and heading ψ (Euler a = ψ,
@@ -320,6 +399,13 @@ const REAIM_POS: f64 = 0.005;
 const REAIM_VEL: f64 = 0.02;
 const REAIM_SPIN: f64 = 5.0;
 
+/// `b` is within `times` the re-aim bounds of `a`.
+fn near(a: &BallState, b: &BallState, times: f64) -> bool {
+    (a.pos - b.pos).norm() < REAIM_POS * times
+        && (a.vel - b.vel).norm() < REAIM_VEL * times
+        && (a.spin - b.spin).norm() < REAIM_SPIN * times
+}
+
 /// Aims the return of `ball` (the predicted state at the hit) at
 /// `target` (x, y in T): resumes the search of `warm` (the last aim for
 /// this ball) or starts one from tilt `tilt0` and the heading at the
@@ -340,9 +426,7 @@ pub fn aim(
     let (lo, hi) = bounds.tilt;
     if let Some(w) = warm
         && w.converged
-        && (w.ball.pos - ball.pos).norm() < REAIM_POS
-        && (w.ball.vel - ball.vel).norm() < REAIM_VEL
-        && (w.ball.spin - ball.spin).norm() < REAIM_SPIN
+        && near(&w.ball, ball, 1.0)
     {
         return Aim { flights: 0, ..*w };
     }
@@ -579,6 +663,41 @@ mod tests {
         assert!(again.converged);
         assert!((again.tilt - first.tilt).abs() < 0.05);
         assert_eq!(again.speed_step, first.speed_step);
+    }
+
+    #[test]
+    fn a_fresh_search_takes_over_from_one_that_climbed_for_another_ball() {
+        let (bounds, target, prop, racket) = cell();
+        // Heavy backspin, slow and low: the search climbs to the fastest
+        // bat (the same ball as the test below).
+        let heavy = BallState::new(Vec3::new(1.6, 0.0, 0.16), Vec3::new(2.0, 0.0, -1.0), Vec3::new(0.0, -900.0, 0.0));
+        let mut searches = Searches::default();
+        for _ in 0..40 {
+            searches.step(&bounds, target, &prop, &racket, &heavy, tilt0(&heavy), AIM_BUDGET);
+        }
+        let climbed = searches.current.expect("aimed");
+        assert_eq!(climbed.level + 1, SPEED_STEPS, "{climbed:?}");
+        // The prediction moves to a ball a slower bat lands.
+        let b = balls()[0];
+        let cold = aim(&bounds, target, &prop, &racket, &b, tilt0(&b), None, 64);
+        assert!(cold.converged && cold.speed_step + 1 < SPEED_STEPS, "{cold:?}");
+        let (mut alone, mut both) = (climbed, climbed);
+        for _ in 0..20 {
+            alone = aim(&bounds, target, &prop, &racket, &b, tilt0(&b), Some(&alone), AIM_BUDGET);
+            both = searches.step(&bounds, target, &prop, &racket, &b, tilt0(&b), AIM_BUDGET);
+        }
+        // The search alone stays at the bat it climbed to; beside a fresh
+        // one, the plan gets the slower bat's face, within each plan's
+        // budget twice over.
+        assert!(alone.speed_step > cold.speed_step, "{alone:?}");
+        assert!(both.converged && both.speed_step == cold.speed_step, "{both:?}");
+        assert!(
+            (both.tilt - cold.tilt).abs() < 0.02,
+            "{:.1}° vs {:.1}°",
+            both.tilt.to_degrees(),
+            cold.tilt.to_degrees()
+        );
+        assert!(both.flights <= 2 * AIM_BUDGET);
     }
 
     #[test]

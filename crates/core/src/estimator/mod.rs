@@ -35,7 +35,7 @@ use crate::motion::reach::ReachMap;
 use crate::physics::{FlightScales, Propagator, RacketModel, Vec3};
 use crate::plan::StrikePlan;
 use crate::time::Instant;
-pub use aim::{Aim, AimBounds, ArmReach, Landing, aim, bat_velocity, face_normal};
+pub use aim::{Aim, AimBounds, ArmReach, Landing, Searches, aim, bat_velocity, face_normal};
 pub use ekf::{Ekf, EkfNoise, Update};
 pub use session::{LearnConfig, Learned, LearnedSession};
 pub use spin_prior::{SPIN_BIN_CENTRES, SPIN_BINS, SpinPrior};
@@ -277,9 +277,9 @@ struct Track {
     bounce_t: Option<f64>,
     /// Accepted observations after the bounce, short of the hitting plane.
     after: HVec<Sample, AFTER_CAP>,
-    /// The last aim of the return (`strike.aim = "landing"`): the next
-    /// refinement starts from it.
-    aim: Option<aim::Aim>,
+    /// The aim of the return (`strike.aim = "landing"`): the next
+    /// refinement resumes its searches.
+    aim: aim::Searches,
     /// The batch reading the window now, if any, and the window's length
     /// when the last one began.
     batch: Option<smooth::Batch>,
@@ -637,7 +637,7 @@ impl Estimator {
             spin_before_bounce: None,
             bounce_t: None,
             after: HVec::new(),
-            aim: None,
+            aim: aim::Searches::default(),
             batch: None,
             batch_from: 0,
             smoothed: false,
@@ -818,7 +818,6 @@ impl Estimator {
             AimMode::Landing => {
                 let tilt0 = -stroke::paper_beta(&self.strike, &spin);
                 let target = track.target;
-                let warm = track.aim.as_ref();
                 let p = &hit.state.pos;
                 let bounds = match self.reach.get(plane) {
                     Some(m) => self.aim_bounds.within(aim::ArmReach::at(m, p.y, p.z)),
@@ -826,8 +825,7 @@ impl Estimator {
                 };
                 // The return flies with the spin the rubber gave it.
                 let prop = Propagator { bounce: track.prop.bounce.with_spin_scale(1.0), ..track.prop };
-                let a = aim::aim(&bounds, target, &prop, &self.racket, &hit_state, tilt0, warm, aim::AIM_BUDGET);
-                track.aim = Some(a);
+                let a = track.aim.step(&bounds, target, &prop, &self.racket, &hit_state, tilt0, aim::AIM_BUDGET);
                 let roll = match bounds.arm {
                     Some(arm) => arm.roll(a.tilt),
                     None => stroke::bat_roll(&self.strike, hit.state.pos.y),
