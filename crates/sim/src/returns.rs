@@ -355,22 +355,23 @@ fn returning_tilts(prop: &Propagator, racket: &RacketModel, ball: &BallState, ba
 const SPIN_STEPS_PER_DOUBLING: i32 = 10;
 
 /// The stroke's spin window: the run of multiples 2^(k/10), k in −10..=10
-/// ([`SPIN_STEPS_PER_DOUBLING`]), of `ball`'s spin (the state at the contact, `t` s after launch) with
-/// which the same `bat` returns it, nearest ×1 — its ends are how much
-/// less and more spin the stroke forgives. The ball's position and
+/// ([`SPIN_STEPS_PER_DOUBLING`]), of `ball`'s spin (the state at the
+/// contact, `t` s after launch) with which the same `bat` returns it,
+/// nearest ×1 — its ends are how much less and more spin the stroke
+/// forgives. The ball's position and
 /// velocity at the contact are held (the spin's effect on the arrival is
 /// the timing window's); `None`: no multiple returns it.
 pub fn spin_window(prop: &Propagator, racket: &RacketModel, ball: &BallState, bat: &Bat, t: f64) -> Option<[f64; 2]> {
     let n = bat.normal;
     let v_s = bat.surface_velocity(&(ball.pos - n * racket.radius));
-    let returns = |k: i32| {
-        let scaled =
-            BallState { spin: ball.spin * 2f64.powf(f64::from(k) / f64::from(SPIN_STEPS_PER_DOUBLING)), ..*ball };
+    let multiple = |k: f64| 2f64.powf(k / f64::from(SPIN_STEPS_PER_DOUBLING));
+    let returns = |k: f64| {
+        let scaled = BallState { spin: ball.spin * multiple(k), ..*ball };
         racket.hit(&scaled, &n, &v_s).is_some_and(|i| fly_return(prop, &i.after, t).0.is_none())
     };
     let steps: Vec<(f64, bool)> =
-        (-SPIN_STEPS_PER_DOUBLING..=SPIN_STEPS_PER_DOUBLING).map(|k| (f64::from(k), returns(k))).collect();
-    nearest_run(&steps, 0.0).map(|r| r.map(|k| 2f64.powf(k / f64::from(SPIN_STEPS_PER_DOUBLING))))
+        (-SPIN_STEPS_PER_DOUBLING..=SPIN_STEPS_PER_DOUBLING).map(f64::from).map(|k| (k, returns(k))).collect();
+    nearest_run(&steps, 0.0).map(|r| r.map(multiple))
 }
 
 /// How far the ball's arrival is shifted at most when a stroke's timing

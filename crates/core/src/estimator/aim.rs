@@ -132,9 +132,9 @@ pub struct Aim {
 /// and, where that one has climbed to a faster bat or moved its target
 /// back, a fresh search for the latest prediction beside it.
 #[derive(Copy, Clone, Debug, Default, PartialEq)]
-pub struct Searches {
+pub(crate) struct Searches {
     /// The search whose face the plans send.
-    pub current: Option<Aim>,
+    current: Option<Aim>,
     /// The fresh one, while there is one.
     fresh: Option<Aim>,
     /// The ball the latest fresh search began for: another begins once
@@ -156,7 +156,7 @@ impl Searches {
     /// over once it lands the ball with a slower bat, or the current
     /// one has not landed it.
     #[allow(clippy::too_many_arguments)]
-    pub fn step(
+    pub(crate) fn step(
         &mut self,
         bounds: &AimBounds,
         target: [f64; 2],

@@ -35,7 +35,7 @@ use crate::motion::reach::ReachMap;
 use crate::physics::{FlightScales, Propagator, RacketModel, Vec3};
 use crate::plan::StrikePlan;
 use crate::time::Instant;
-pub use aim::{Aim, AimBounds, ArmReach, Landing, Searches, aim, bat_velocity, face_normal};
+pub use aim::{Aim, AimBounds, ArmReach, Landing, aim, bat_velocity, face_normal};
 pub use ekf::{Ekf, EkfNoise, Update};
 pub use session::{LearnConfig, Learned, LearnedSession};
 pub use spin_prior::{SPIN_BIN_CENTRES, SPIN_BINS, SpinPrior};
