@@ -63,14 +63,17 @@ fn cycles(c: &mut Criterion, cal: &Calibration, correction: Correction, q: [f64;
         cfg.start.follow_tolerance_deg = 1e9;
         RsiSession::new(cfg).unwrap()
     };
-    let plan = |seq: u32, now: Instant, hit: Instant| StrikePlan {
+    // `turn`: the face's tilt alternates by 29° from plan to plan, so that
+    // near the hit every refinement is late and taken in part (the
+    // generator's costliest path: a search over shares of the turn).
+    let plan = |seq: u32, now: Instant, hit: Instant, turn: bool| StrikePlan {
         seq,
         trajectory: 1,
         made_at: now,
         hit_time: hit,
         position: Vec3::new(1.6, 0.2 + (seq % 7) as f64 * 1e-3, 0.3),
         velocity: Vec3::new(-1.0, 0.0, 0.1),
-        orientation: EulerZyx { a: 0.1, b: 0.3, c: 0.0 },
+        orientation: EulerZyx { a: 0.1, b: 0.3 + if turn { (seq % 2) as f64 * 0.5 } else { 0.0 }, c: 0.0 },
         spin: Vec3::zeros(),
         confidence: 1.0,
     };
@@ -87,20 +90,23 @@ fn cycles(c: &mut Criterion, cal: &Calibration, correction: Correction, q: [f64;
     });
     // Cycle with a new plan every cycle (Ruckig re-plan each time); a new
     // stroke every 100 cycles so the hit stays ahead.
-    let mut s = mk();
-    let mut k = 0u64;
-    c.bench_function(&format!("{prefix}_replan"), |b| {
-        b.iter(|| {
-            k += 1;
-            let now = Instant(1_000_000_000 + k * 4_000_000);
-            let hit = Instant(1_000_000_000 + ((k / 100) * 100 + 150) * 4_000_000);
-            s.set_plan(plan(k as u32, now, hit));
-            let n = request(100 + 4 * k, q, req);
-            s.handle_datagram(now, &req[..n], out).unwrap()
-        })
-    });
-    assert_eq!(s.stats().axis_held, 0, "{correction}: every cycle sent");
-    assert_eq!(s.stats().arm_stops, 0, "{correction}: the strokes were planned");
+    for (name, turn) in [("replan", false), ("replan_turn", true)] {
+        let mut s = mk();
+        let mut k = 0u64;
+        c.bench_function(&format!("{prefix}_{name}"), |b| {
+            b.iter(|| {
+                k += 1;
+                let now = Instant(1_000_000_000 + k * 4_000_000);
+                let hit = Instant(1_000_000_000 + ((k / 100) * 100 + 150) * 4_000_000);
+                s.set_plan(plan(k as u32, now, hit, turn));
+                let n = request(100 + 4 * k, q, req);
+                s.handle_datagram(now, &req[..n], out).unwrap()
+            })
+        });
+        assert_eq!(s.stats().axis_held, 0, "{correction}: every cycle sent");
+        assert_eq!(s.stats().arm_stops, 0, "{correction}: the strokes were planned");
+        assert_eq!(s.generator().taken_in_part > 0, turn, "{correction} {name}: late turns taken in part");
+    }
 }
 
 criterion_group!(benches, bench);

@@ -34,8 +34,12 @@
 //! where a target may be (inside the box and the joint margins), and a
 //! refinement that a new stroke would meet late is blended onto the
 //! committed one ([`super::blend`]: a quintic correction per axis) where
-//! the sum stays within the limits. Only where neither works does the old
-//! weighing apply: a late new stroke against keeping the old one.
+//! the sum stays within the limits. A refinement for the same ball that
+//! neither meets on time (a face turned late can ask tens of degrees of
+//! the wrist) is taken in part: its hitting point, and the largest share of
+//! its turn of the face that a new stroke meets on time. Only where no part
+//! works does the old weighing apply: a late new stroke against keeping
+//! the old one.
 //!
 //! Ruckig is only asked to calculate when the target changes (a new plan,
 //! or a phase change); other cycles sample the stored trajectory. With six
@@ -104,6 +108,9 @@ const PATH_CHECKS: usize = 16;
 const RATE_CHECK_S: f64 = 0.001;
 /// … at most this many times (a blend over 0.25 s is checked coarser).
 const MAX_RATE_CHECKS: usize = 256;
+/// Halvings of the share of a late refinement's change of face and bat
+/// velocity that is taken on time (the share is found to 1/16).
+const PART_STEPS: usize = 4;
 /// Share of the stroke's limits for follow-through and return.
 pub(crate) const CALM_LIMIT_FRACTION: f64 = 0.5;
 /// A new ball's stroke arriving later than this is refused, s (the bat
@@ -243,6 +250,9 @@ pub struct StrokeGenerator {
     pub kept: u64,
     /// Refinements blended onto the committed stroke.
     pub blended: u64,
+    /// Late refinements taken in part (their hitting point, and as much of
+    /// their change of face and bat velocity as a stroke meets on time).
+    pub taken_in_part: u64,
 }
 
 fn secs(t: Instant) -> f64 {
@@ -274,6 +284,7 @@ impl StrokeGenerator {
             failures: 0,
             kept: 0,
             blended: 0,
+            taken_in_part: 0,
         };
         g.set_limit_scale(1.0);
         g.reset(now, start);
@@ -509,6 +520,15 @@ impl StrokeGenerator {
             restore(self);
             return Err(PlanRejected::TooLate);
         }
+        if late_by > LATE_TOLERANCE_S
+            && same_ball
+            && let Some(old) = old_target
+            && old.hit_time > self.t_last
+            && let Some(part) = self.on_time_part(&old, &target, duration)
+        {
+            self.taken_in_part += 1;
+            return Ok(self.take(part, 0.0));
+        }
         if !self.path_within_limits(self.traj.get_duration()) {
             restore(self);
             return Err(PlanRejected::PathOutside);
@@ -633,6 +653,61 @@ impl StrokeGenerator {
         }
         self.blend = Some(blend);
         true
+    }
+
+    /// The part of a late refinement a new stroke still meets on time: its
+    /// hitting point whole, and the largest share of its change of face and
+    /// bat velocity (halving [`PART_STEPS`] times; none as the last
+    /// resort). A face turned late can ask tens of degrees of the wrist
+    /// axes, which the time left cannot give; the share it can give brings
+    /// the face nearer. `None` (and the whole refinement's late stroke
+    /// calculated again) if no part is on time and within the limits.
+    fn on_time_part(&mut self, old: &StrokeTarget, new: &StrokeTarget, duration: f64) -> Option<StrokeTarget> {
+        let (mut lo, mut hi) = (0.0, 1.0);
+        let (mut best, mut last_on_time) = (None, false);
+        let on_time = |g: &mut Self, share: f64| {
+            let t = g.part_of(old, new, share)?;
+            (g.calculate(&t.joints.0, &t.joint_velocity, Some(duration))
+                && g.traj.get_duration() - duration <= LATE_TOLERANCE_S
+                && g.path_within_limits(duration))
+            .then_some(t)
+        };
+        for _ in 0..PART_STEPS {
+            let share = 0.5 * (lo + hi);
+            let part = on_time(self, share);
+            last_on_time = part.is_some();
+            match part {
+                Some(t) => {
+                    best = Some(t);
+                    lo = share;
+                }
+                None => hi = share,
+            }
+        }
+        if best.is_none() {
+            best = on_time(self, 0.0);
+            last_on_time = best.is_some();
+        }
+        // The trajectory calculated last must be the one taken.
+        if !last_on_time {
+            let (pos, vel) = best.map_or((new.joints.0, new.joint_velocity), |t| (t.joints.0, t.joint_velocity));
+            self.calculate(&pos, &vel, Some(duration));
+        }
+        best
+    }
+
+    /// `new` with `share` of its change of orientation and velocity from
+    /// `old` (its position whole), and its joints; `None` where that pose
+    /// has none within the limits.
+    fn part_of(&self, old: &StrokeTarget, new: &StrokeTarget, share: f64) -> Option<StrokeTarget> {
+        let mut t = *new;
+        for i in 3..6 {
+            t.pose[i] = old.pose[i] + share * (unwrap_near(new.pose[i], old.pose[i]) - old.pose[i]);
+        }
+        for i in 0..6 {
+            t.velocity[i] = old.velocity[i] + share * (new.velocity[i] - old.velocity[i]);
+        }
+        self.to_joints(&mut t).ok().map(|()| t)
     }
 
     /// Replaces the state the next plan starts from (after the safety

@@ -101,6 +101,31 @@ fn refinements_close_to_the_hit_are_blended_rather_than_late() {
     run(&mut g, 101, 200, &mut q);
 }
 
+#[test]
+fn a_late_turn_of_the_face_is_taken_as_far_as_it_is_on_time() {
+    // 100 ms before the hit the face is read 15° more open: a stroke to
+    // that face would arrive late and blending it in breaks the limits.
+    // The refinement's hitting point is taken whole, and the largest share
+    // of its turn that a stroke still meets on time.
+    let mut g = generator();
+    let mut q = Vec::new();
+    g.set_plan(&plan(1, 0.1, 0.25, 0.2, 400)).expect("reachable");
+    run(&mut g, 1, 75, &mut q);
+    let old = *g.target().expect("the first stroke");
+    let refined = plan(2, 0.11, 0.25, 0.2 + 15f64.to_radians(), 400);
+    let whole = g.target_of(&refined).expect("reachable");
+    let target = *g.set_plan(&refined).expect("taken");
+    assert_eq!((target.seq, g.late_by(), g.taken_in_part, g.kept), (2, 0.0, 1, 0), "blended {}", g.blended);
+    assert!((0..3).all(|i| (target.pose[i] - whole.pose[i]).abs() < 1e-9), "the hitting point whole");
+    let share = (target.pose[4] - old.pose[4]) / (whole.pose[4] - old.pose[4]);
+    assert!(share > 0.05 && share < 1.0, "part of the turn: {share}");
+    run(&mut g, 75, 100, &mut q);
+    let at_hit = g.next(Instant(T0 + 400_000_000));
+    q.push(g.joints().0);
+    assert!((0..6).all(|i| (at_hit[i] - target.pose[i]).abs() < 1e-6), "{at_hit:?} vs {:?}", target.pose);
+    run(&mut g, 101, 200, &mut q);
+}
+
 /// A generator caught mid-stroke (joints, speeds, accelerations as a
 /// virtual-cell run left them) and a ball `ahead` s from now: the plan it
 /// is asked to take next.
