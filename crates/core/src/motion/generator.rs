@@ -500,20 +500,9 @@ impl StrokeGenerator {
             }
             std::mem::swap(&mut self.traj, &mut self.spare);
         }
-        // At the full limits.
-        if !self.calculate(&target.joints.0, &target.joint_velocity, Some(duration)) {
+        if !self.calculate_at_full_limits(&target.joints.0, &target.joint_velocity, duration) {
             restore(self);
             return Err(PlanRejected::NoTrajectory);
-        }
-        // Ruckig's time-synchronisation step sometimes finds no profile for
-        // exactly this duration (numerically, not physically) and returns
-        // the end of a later interval. Nudging the duration by a fraction of
-        // a millisecond finds a profile in nearly all those cases.
-        for nudge in RETRY_NUDGES_S {
-            if self.traj.get_duration() - duration <= LATE_TOLERANCE_S {
-                break;
-            }
-            self.calculate(&target.joints.0, &target.joint_velocity, Some(duration + nudge));
         }
         let late_by = (self.traj.get_duration() - duration).max(0.0);
         if late_by > MAX_LATE_S && !same_ball {
@@ -688,12 +677,34 @@ impl StrokeGenerator {
             best = on_time(self, 0.0);
             last_on_time = best.is_some();
         }
-        // The trajectory calculated last must be the one taken.
+        // The trajectory calculated last must be the one taken: the part's,
+        // or the whole refinement's late one as `set_plan` calculated it.
         if !last_on_time {
-            let (pos, vel) = best.map_or((new.joints.0, new.joint_velocity), |t| (t.joints.0, t.joint_velocity));
-            self.calculate(&pos, &vel, Some(duration));
+            match best {
+                Some(t) => self.calculate(&t.joints.0, &t.joint_velocity, Some(duration)),
+                None => self.calculate_at_full_limits(&new.joints.0, &new.joint_velocity, duration),
+            };
         }
         best
+    }
+
+    /// The stroke to joints `pos` and joint velocity `vel` at the full
+    /// limits, ending `duration` s from now where it can; false if Ruckig
+    /// fails. Ruckig's time-synchronisation step sometimes finds no
+    /// profile for exactly this duration (numerically, not physically) and
+    /// returns the end of a later interval. Nudging the duration by a
+    /// fraction of a millisecond finds a profile in nearly all those cases.
+    fn calculate_at_full_limits(&mut self, pos: &[f64; AXES], vel: &[f64; AXES], duration: f64) -> bool {
+        if !self.calculate(pos, vel, Some(duration)) {
+            return false;
+        }
+        for nudge in RETRY_NUDGES_S {
+            if self.traj.get_duration() - duration <= LATE_TOLERANCE_S {
+                break;
+            }
+            self.calculate(pos, vel, Some(duration + nudge));
+        }
+        true
     }
 
     /// `new` with `share` of its change of orientation and velocity from
