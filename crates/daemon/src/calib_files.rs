@@ -121,7 +121,7 @@ mod tests {
         write(DEFAULT_STRIKE.replace("hit_plane_x = 1.60", "hit_plane = 1.6"));
         let e = Calibration::load(Some(dir.path())).unwrap_err().to_string();
         assert!(e.contains("hit_plane"), "{e}");
-        write(DEFAULT_STRIKE.replace("window_y = [-0.60, 0.60]", "window_y = [-0.90, 0.60]"));
+        write(DEFAULT_STRIKE.replace("window_y = [-0.70, 0.70]", "window_y = [-0.90, 0.70]"));
         let e = Calibration::load(Some(dir.path())).unwrap_err().to_string();
         assert!(e.contains("strike.window_y") && e.contains("workspace"), "{e}");
     }

@@ -7,10 +7,11 @@
 
 use topspin_cnn as cnn;
 use topspin_core::calib::Calibration;
+use topspin_core::kinematics::Joints;
 use topspin_core::time::Duration;
 use topspin_daemon::runtime::{LogoMethodChoice, LogoRuntime};
 use topspin_sim::Strokes;
-use topspin_sim::demo::{DemoConfig, OutOfReach};
+use topspin_sim::demo::{BallVerdict, DemoConfig, OutOfReach, meeting};
 use topspin_sim::faults::TrackerFaults;
 use topspin_sim::mock_krc::MockKrcConfig;
 use topspin_sim::virtual_cell::{VirtualRun, run_virtual};
@@ -361,8 +362,16 @@ fn an_arm_that_starts_off_home_is_taken_home_first_and_then_plays() {
     assert_eq!((r.mock.poscorr_clamped, r.mock.rates_over), (0, 0), "{}", summary(&r));
     assert_eq!(r.session.ways_home, 1);
     assert_eq!(r.session.arm_stops, 0);
-    // The way home takes about 2.6 s: the first two balls come before it ends.
-    let later: Vec<_> = r.per_ball.iter().filter(|b| b.reachable).skip(2).collect();
+    // The way home takes about 2.6 s: the first two balls come before it
+    // ends. POSCORR's limits count from the RSI start pose, here 0.15 m
+    // to the side of home (and turned 60°): a ball met beyond them
+    // (y_B = −y_T past +0.65 m) is not the arm's from this start.
+    let start = cal.robot.arm().tcp(&Joints::from_degrees(cfg.start_joints.unwrap())).to_pose6();
+    let (lo, hi) = (cal.robot.poscorr.lower_xyz_mm[1] * 1e-3, cal.robot.poscorr.upper_xyz_mm[1] * 1e-3);
+    let within = |b: &&BallVerdict| {
+        meeting(&cal, &r.balls[b.ball]).is_some_and(|h| (start[1] + lo..=start[1] + hi).contains(&-h.pos[1]))
+    };
+    let later: Vec<_> = r.per_ball.iter().filter(|b| b.reachable).skip(2).filter(within).collect();
     assert!(!later.is_empty() && later.iter().filter(|b| b.hit).count() + 1 >= later.len(), "{}", summary(&r));
 }
 

@@ -545,7 +545,7 @@ impl Calibration {
     /// over `strike.window_y` × `strike.window_z` on the hitting plane, the
     /// points where the bat, held as at home, has a joint solution within
     /// the software limits and off the singular wrist. The default cell
-    /// reaches 0.95 of it (not the high, wide corners).
+    /// reaches 0.87 of it (not the high, wide corners).
     pub fn window_reach(&self) -> f64 {
         self.window_reach_at(self.strike.hit_plane_x)
     }
@@ -705,7 +705,7 @@ mod tests {
     #[test]
     fn the_default_arm_reaches_most_of_the_window() {
         let reach = Calibration::default_cell().window_reach();
-        assert!((0.90..=0.97).contains(&reach), "{reach}");
+        assert!((0.85..=0.92).contains(&reach), "{reach}");
     }
 
     #[test]

@@ -429,6 +429,19 @@ impl RobotFile {
             return Err(BadKey { key: "poscorr.max_rot_angle_deg", value: p.max_rot_angle_deg });
         }
         positive("poscorr.mon_max_trans_mm", &[p.mon_max_trans_mm])?;
+        // And POSCORRMON every corner of the box: the monitor stops the
+        // robot where the PC side still lets a stroke go.
+        let corner_mm = (0..8)
+            .map(|k: usize| {
+                let d: [f64; 3] = core::array::from_fn(|i| {
+                    (if k >> i & 1 == 0 { w.min_xyz_m[i] } else { w.max_xyz_m[i] }) - self.home.xyz_m[i]
+                });
+                1e3 * d.iter().map(|x| x * x).sum::<f64>().sqrt()
+            })
+            .fold(0.0, f64::max);
+        if p.mon_max_trans_mm < corner_mm {
+            return Err(BadKey { key: "poscorr.mon_max_trans_mm", value: p.mon_max_trans_mm });
+        }
         positive("poscorr.mon_max_rot_deg", &[p.mon_max_rot_deg])?;
         let rs = &self.rsi;
         if rs.cycle_ms != 4 && rs.cycle_ms != 12 {
@@ -663,6 +676,10 @@ mod tests {
         let mut r = default_file();
         r.poscorr.upper_xyz_mm[2] = 10.0;
         assert_eq!(r.validate().unwrap_err().key, "poscorr.upper_xyz_mm");
+        // The monitor must let the arm reach the box's far corners.
+        let mut r = default_file();
+        r.poscorr.mon_max_trans_mm = 900.0;
+        assert_eq!(r.validate().unwrap_err(), BadKey { key: "poscorr.mon_max_trans_mm", value: 900.0 });
         let mut r = default_file();
         r.joints.origin_xyz_m[3][1] = 0.01;
         assert_eq!(r.validate().unwrap_err(), BadKey { key: "joints.origin_xyz_m", value: 0.01 });
@@ -698,7 +715,7 @@ mod tests {
         let mut r = default_file();
         r.joints.origin_xyz_m[2][0] = 0.2;
         r.joints.origin_xyz_m[4][0] = 0.2;
-        r.robot.tool_length_m = 0.6;
+        r.robot.tool_length_m = 0.7;
         assert_eq!(r.validate().unwrap_err().key, "home.xyz_m (out of the arm's reach)");
     }
 }

@@ -878,9 +878,12 @@ impl HittingVolume<'_> {
     ///   late to change the stroke there or the ball has passed it;
     /// - else the nominal plane, where the ball passes it at least
     ///   [`WINDOW_MARGIN_M`] inside the window;
-    /// - else the plane where it passes furthest inside the window (and
-    ///   the arm can present a face there), the nearest to the nominal of
-    ///   equals.
+    /// - else the plane where it passes furthest inside the window, the
+    ///   nearest to the nominal of equals.
+    ///
+    /// On every plane, the nominal one too, the arm must be able to
+    /// present a face at the point (the reach map; the window's wide high
+    /// corners are beyond it).
     ///
     /// `bounced`: the ball has bounced on the robot's half, so no plane
     /// past its next bounce counts. `Err`: why the nominal plane does not
@@ -896,7 +899,8 @@ impl HittingVolume<'_> {
     ) -> Result<(HitPoint, usize), Withheld> {
         let home = self.strike.nominal_plane();
         let at_home = match nominal.hit {
-            Some(hit) => stroke::check(self.strike, &hit, hit.t - t).map(|()| (hit, home)),
+            Some(hit) => stroke::check(self.strike, &hit, hit.t - t)
+                .and_then(|()| self.reached(home, &hit).map(|()| (hit, home))),
             None => Err(Withheld::NoHit),
         };
         let roomy = at_home.as_ref().is_ok_and(|(hit, _)| self.margin(hit) >= WINDOW_MARGIN_M);
@@ -918,11 +922,7 @@ impl HittingVolume<'_> {
             if !self.strike.in_window_at(self.planes[k], p.y, p.z) {
                 return Err(Withheld::OutsideY);
             }
-            let reached = self.reach.get(k).is_none_or(|m| {
-                let arm = aim::ArmReach::at(m, p.y, p.z);
-                arm.caps[..arm.n].iter().any(|c| *c >= self.strike.aim_bat_speed[0])
-            });
-            if reached { Ok(hit) } else { Err(Withheld::OutsideZ) }
+            self.reached(k, &hit).map(|()| hit)
         };
         if let Some(k) = last {
             // Past that plane already, or too late to change: the stroke
@@ -950,6 +950,17 @@ impl HittingVolume<'_> {
             }
         }
         best.map(|(hit, k, _)| (hit, k)).ok_or(at_home.err().unwrap_or(Withheld::NoHit))
+    }
+
+    /// The arm can present a face at `hit` on plane `k` at the aim's
+    /// slowest bat, where the aim uses the reach map.
+    fn reached(&self, k: usize, hit: &HitPoint) -> Result<(), Withheld> {
+        let p = hit.state.pos;
+        let reached = self.reach.get(k).is_none_or(|m| {
+            let arm = aim::ArmReach::at(m, p.y, p.z);
+            arm.caps[..arm.n].iter().any(|c| *c >= self.strike.aim_bat_speed[0])
+        });
+        if reached { Ok(()) } else { Err(Withheld::OutOfReach) }
     }
 
     /// How far inside the window the hitting point lies, m.

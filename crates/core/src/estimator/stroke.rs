@@ -32,6 +32,9 @@ pub enum Withheld {
     OutsideZ,
     /// The hit would come too soon for the robot.
     TooSoon,
+    /// Inside the window, but the arm cannot present a face there at the
+    /// aim's slowest bat (the reach map: the window's wide high corners).
+    OutOfReach,
 }
 
 /// The paper's β for spin ω_y, rad (positive closes the face): +β_top at

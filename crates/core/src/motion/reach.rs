@@ -327,6 +327,8 @@ mod tests {
         let lim = lim();
         let home = lim.home_joints;
         let mut pose = lim.arm.tcp(&home).to_pose6();
+        // Low, where the arm reaches past the box's side.
+        pose[2] = lim.lo[2] + 0.05;
         for (y, clear) in [(lim.hi[1] - 0.02, true), (lim.hi[1] + 0.02, false)] {
             pose[1] = y;
             let q = lim.arm.inverse_near(&Pose::from_pose6(&pose), &home).expect("reachable");
