@@ -13,9 +13,10 @@
 //! more than it has, pass a software limit switch on the way (the limits
 //! are checked at the target, and along the path: a time-synchronised
 //! profile may swing an axis well past its target to turn it round, so a
-//! stroke whose path comes within [`PATH_LIMIT_MARGIN_RAD`] of a limit or
-//! takes the TCP out of the workspace's box or orientation range is
-//! refused), or sweep through a singularity at speed. Each setpoint is the
+//! stroke whose path comes within [`PATH_LIMIT_MARGIN_RAD`] of a limit,
+//! within [`PATH_WRIST_MARGIN`] of the singular wrist, or takes the TCP
+//! out of the workspace's box or orientation range is refused), or sweep
+//! through a singularity at speed. Each setpoint is the
 //! forward kinematics of the sampled joints: a TCP pose in B, as RSI's
 //! POSCORR wants it.
 //!
@@ -34,12 +35,14 @@
 //! where a target may be (inside the box and the joint margins), and a
 //! refinement that a new stroke would meet late is blended onto the
 //! committed one ([`super::blend`]: a quintic correction per axis) where
-//! the sum stays within the limits. A refinement for the same ball that
+//! the sum stays within the limits. A refinement for the same ball (the
+//! same trajectory, or a hit within [`KEEP_MAX_DT_S`] of the old one) that
 //! neither meets on time (a face turned late can ask tens of degrees of
 //! the wrist) is taken in part: its hitting point, and the largest share of
 //! its turn of the face that a new stroke meets on time. Only where no part
-//! works does the old weighing apply: a late new stroke against keeping
-//! the old one.
+//! works does the old weighing apply, for a hit within [`KEEP_MAX_DT_S`]:
+//! a late new stroke against keeping the old one; any other stroke later
+//! than [`MAX_LATE_S`] is refused.
 //!
 //! Ruckig is only asked to calculate when the target changes (a new plan,
 //! or a phase change); other cycles sample the stored trajectory. With six
@@ -64,7 +67,7 @@ use super::MotionLimits;
 use super::blend::Blend;
 use super::margins::{
     JERK_RAMP_S, JOINT_LIMIT_FRACTION, ORIENTATION_MARGIN_RAD, PATH_LIMIT_MARGIN_RAD, PATH_WALL_MARGIN_M,
-    VELOCITY_STEP_S, WRIST_MARGIN,
+    PATH_WRIST_MARGIN, VELOCITY_STEP_S, WRIST_MARGIN,
 };
 use super::reach;
 use crate::geometry::{Pose6, unwrap_near};
@@ -113,8 +116,9 @@ const MAX_RATE_CHECKS: usize = 256;
 const PART_STEPS: usize = 4;
 /// Share of the stroke's limits for follow-through and return.
 pub(crate) const CALM_LIMIT_FRACTION: f64 = 0.5;
-/// A new ball's stroke arriving later than this is refused, s (the bat
-/// would be ~4 cm behind a ball crossing at 4 m/s).
+/// A stroke arriving later than this is refused, s (the bat would be
+/// ~4 cm behind a ball crossing at 4 m/s), unless it refines a hit within
+/// [`KEEP_MAX_DT_S`] and is weighed against the old stroke.
 pub(crate) const MAX_LATE_S: f64 = 0.010;
 
 /// What the generator is doing.
@@ -159,8 +163,9 @@ pub enum PlanRejected {
     #[error("stroke would arrive too late")]
     TooLate,
     /// The stroke's path would come within `PATH_LIMIT_MARGIN_RAD` of a
-    /// software limit switch or take the TCP out of the workspace (its box
-    /// or orientation range, where the safety filter brakes):
+    /// software limit switch or `PATH_WRIST_MARGIN` of the singular wrist,
+    /// or take the TCP out of the workspace (its box or orientation range,
+    /// where the safety filter brakes):
     /// Ruckig's fastest profile may swing an axis past its target to turn
     /// it round.
     #[error("stroke's path leaves the axes' range or the workspace")]
@@ -200,6 +205,8 @@ impl PlanRejected {
 pub struct StrokeTarget {
     /// The `seq` of the plan this target came from.
     pub seq: u32,
+    /// The ball's trajectory id, as the plan named it.
+    pub trajectory: u32,
     /// When the TCP should be at `pose`, s on the `Instant` clock.
     pub hit_time: f64,
     /// TCP pose at the hit (m, rad), pulled into the workspace if needed.
@@ -409,6 +416,7 @@ impl StrokeGenerator {
         }
         let mut target = StrokeTarget {
             seq: plan.seq,
+            trajectory: plan.trajectory,
             hit_time,
             pose,
             velocity: vel,
@@ -489,9 +497,14 @@ impl StrokeGenerator {
             return Ok(self.take(target, 0.0));
         }
         // Late, for the same ball: blend the change onto the committed
-        // stroke where the axes allow it.
-        let same_ball = old_phase == Phase::Approach
+        // stroke where the axes allow it, or take the largest share of it
+        // that is on time. The same ball is the same trajectory, or one
+        // whose hit comes within `KEEP_MAX_DT_S` (a track the estimator
+        // lost and found again): a spin read anew moves the hit by more.
+        let near_in_time = old_phase == Phase::Approach
             && old_target.is_some_and(|old| (old.hit_time - target.hit_time).abs() <= KEEP_MAX_DT_S);
+        let same_ball = near_in_time
+            || old_phase == Phase::Approach && old_target.is_some_and(|old| old.trajectory == target.trajectory);
         if same_ball && old_target.is_some_and(|old| old.hit_time > self.t_last) {
             restore(self);
             if self.blend_to(&target) {
@@ -505,10 +518,6 @@ impl StrokeGenerator {
             return Err(PlanRejected::NoTrajectory);
         }
         let late_by = (self.traj.get_duration() - duration).max(0.0);
-        if late_by > MAX_LATE_S && !same_ball {
-            restore(self);
-            return Err(PlanRejected::TooLate);
-        }
         if late_by > LATE_TOLERANCE_S
             && same_ball
             && let Some(old) = old_target
@@ -517,6 +526,12 @@ impl StrokeGenerator {
         {
             self.taken_in_part += 1;
             return Ok(self.take(part, 0.0));
+        }
+        // Later than `MAX_LATE_S` only a refinement near the old hit in
+        // time is worth it (weighed against the old stroke below).
+        if late_by > MAX_LATE_S && !near_in_time {
+            restore(self);
+            return Err(PlanRejected::TooLate);
         }
         if !self.path_within_limits(self.traj.get_duration()) {
             restore(self);
@@ -571,13 +586,16 @@ impl StrokeGenerator {
     }
 
     /// The stroke keeps the TCP in the workspace (box and orientation range,
-    /// where the safety filter would brake it) and the axes
-    /// [`PATH_LIMIT_MARGIN_RAD`] inside their software limits, at
+    /// where the safety filter would brake it), the axes
+    /// [`PATH_LIMIT_MARGIN_RAD`] inside their software limits and A5
+    /// [`PATH_WRIST_MARGIN`] off the singular wrist on its side, at
     /// [`PATH_CHECKS`] instants over the next `duration` s.
     fn path_within_limits(&self, duration: f64) -> bool {
+        let wrist = PATH_WRIST_MARGIN * self.lim.arm.limits.singular_a5;
         self.path_all(duration, |q| {
+            let off_wrist = q[4] * self.q[4] > 0.0 && q[4].abs() >= wrist;
             let q = Joints(*q);
-            self.in_workspace(&q) && reach::inside_by(&self.lim, &q, PATH_LIMIT_MARGIN_RAD).is_ok()
+            off_wrist && self.in_workspace(&q) && reach::inside_by(&self.lim, &q, PATH_LIMIT_MARGIN_RAD).is_ok()
         })
     }
 

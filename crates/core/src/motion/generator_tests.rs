@@ -126,6 +126,34 @@ fn a_late_turn_of_the_face_is_taken_as_far_as_it_is_on_time() {
     run(&mut g, 101, 200, &mut q);
 }
 
+#[test]
+fn a_spin_read_anew_moves_the_hit_but_stays_the_same_ball() {
+    // The first plan read the ball as backspin: high, the face open. 100 ms
+    // into the stroke the spin is read as topspin: the ball comes 14 ms
+    // earlier and low, for a closed face. No stroke gets there on time;
+    // for the same trajectory the largest on-time share of the change is
+    // taken, where a new ball that late is refused.
+    let first = plan(1, 0.1, 0.45, 0.45, 330);
+    let anew = |trajectory| StrikePlan { trajectory, ..plan(2, 0.0, 0.15, -0.35, 316) };
+    let caught = || {
+        let mut g = generator();
+        g.set_plan(&first).expect("reachable");
+        run(&mut g, 1, 25, &mut Vec::new());
+        g
+    };
+    let (mut g, mut other, mut q) = (caught(), caught(), Vec::new());
+    assert_eq!(other.set_plan(&anew(2)).map(|t| t.seq), Err(PlanRejected::TooLate), "a new ball that late");
+    let target = *g.set_plan(&anew(1)).expect("the same ball's refinement is taken");
+    assert_eq!((target.seq, g.late_by(), g.taken_in_part), (2, 0.0, 1), "taken in part, on time");
+    run(&mut g, 25, 79, &mut q);
+    // At the hitting time the bat is at the part's pose, arriving within
+    // the generator's tolerance (half a millisecond at 1.5 m/s).
+    let at_hit = g.next(Instant(T0 + 316_000_000));
+    q.push(g.joints().0);
+    assert!((0..6).all(|i| (at_hit[i] - target.pose[i]).abs() < 1e-3), "{at_hit:?} vs {:?}", target.pose);
+    run(&mut g, 80, 200, &mut q);
+}
+
 /// A generator caught mid-stroke (joints, speeds, accelerations as a
 /// virtual-cell run left them) and a ball `ahead` s from now: the plan it
 /// is asked to take next.
@@ -164,6 +192,23 @@ fn a_stroke_that_would_swing_an_axis_past_its_limit_is_refused() {
         [0.0, 0.0, 4.4644511, -4.5072544, -8.7170344, -2.6644027],
         0.524372,
         [1.6, 0.0451092, 0.2412270, -1.5319272, -0.0222555, 1.2855752, 0.0145268, 0.6981317, 0.5366887],
+    );
+    assert!(matches!(g.set_plan(&ball), Err(PlanRejected::PathOutside)), "{:?}", g.set_plan(&ball));
+}
+
+#[test]
+fn a_stroke_whose_path_swings_through_the_singular_wrist_is_refused() {
+    // Seen in the virtual cell (seed 14, a window down to 0.13 m): a low
+    // ball with the face opened 27°, 0.40 s ahead, the wrist swinging
+    // down at A5 = 56°. At the full limits the stroke's profile turns A5
+    // round at 0.05°, and the controller stops at the singular wrist
+    // (|A5| < 1°), though the hitting pose keeps A5 well clear of it.
+    let (mut g, ball) = caught(
+        [0.0801857, -1.6163414, 2.2292925, 0.0064045, 0.9688559, 0.1249250],
+        [1.6581393, 0.7592962, 0.6312773, -2.4386924, -1.6791941, 4.8773929],
+        [0.0, 0.0, -3.8920344, -84.6484687, 0.0, 43.7274551],
+        0.395337,
+        [1.6, 0.2470923, 0.2122763, -1.6392227, 0.6380645, 0.8859282, -0.3712033, 0.4665606, 0.0654498],
     );
     assert!(matches!(g.set_plan(&ball), Err(PlanRejected::PathOutside)), "{:?}", g.set_plan(&ball));
 }

@@ -44,5 +44,13 @@ pub(crate) const ELBOW_MARGIN_RAD: f64 = 10.0 * std::f64::consts::PI / 180.0;
 /// threshold, on the same side as now.
 pub(crate) const WRIST_MARGIN: f64 = 5.0;
 
+/// A stroke at the full limits keeps |A5| at least this many times the
+/// singular threshold all along its path, on the side it is on now:
+/// Ruckig's fastest profile swings A5 past its target as it does every
+/// axis, towards the singular wrist where the target is low and the face
+/// open (the controller stops there). At the swing's extreme A5 is at
+/// rest; between two path checks it moves under a degree.
+pub(crate) const PATH_WRIST_MARGIN: f64 = 2.0;
+
 /// Step used to turn a bat velocity into joint velocities, s.
 pub(crate) const VELOCITY_STEP_S: f64 = 1e-3;
