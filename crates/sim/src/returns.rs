@@ -608,6 +608,7 @@ mod tests {
             &cal.propagator(),
             &cal.racket_model(),
             s,
+            0.0,
             -paper_beta(&cal.strike, &s.spin),
             None,
             64,

@@ -132,13 +132,14 @@ fn every_tracker_fault_at_once_is_survived_and_counted_exactly() {
 /// The measurement behind docs/results.md's virtual-cell numbers (not a check):
 /// `SEEDS=1,2,3,4,5,7 BALLS=27 [CORRECTION=axis] [WORLD=real-launcher]
 /// [STROKES=human-rally] [LOGO=background|cnn] [AIM_TARGET=x,y]
-/// [AIM_PATTERN=x,y;x,y] [AIM_AWAY=1] [PLANE_ALONE=1] cargo test --release --test virtual_cell --
+/// [AIM_PATTERN=x,y;x,y] [AIM_AWAY=1] [AIM_BAT_SPEED=slow,fast] [PLANE_ALONE=1]
+/// cargo test --release --test virtual_cell --
 /// --ignored --nocapture` (`WORLD`: a world of `topspin eval worlds`,
 /// default the calibration's own physics; `STROKES`: the balls' source,
 /// default the cell's launcher; `LOGO`: the ceiling camera's spin fused,
 /// found by background subtraction or the CNN; `AIM_…`: where the returns
-/// are aimed, `strike.aim_target`, a pattern, or away from the opponent;
-/// `PLANE_ALONE`: the hitting plane without the volume)
+/// are aimed, `strike.aim_target`, a pattern, or away from the opponent,
+/// and `strike.aim_bat_speed`; `PLANE_ALONE`: the hitting plane without the volume)
 /// prints every ball not returned (or
 /// missed) with the judge's reason and the totals over the seeds: over
 /// the reachable balls, and over all balls (every ball of a run bounces
@@ -157,6 +158,9 @@ fn returns_over_seeds() {
     if let Ok(p) = std::env::var("AIM_PATTERN") {
         cal.strike.aim_pattern = p.split(';').map(pair).collect();
         cal.strike.aim_strategy = topspin_core::calib::AimStrategy::Pattern;
+    }
+    if let Ok(v) = std::env::var("AIM_BAT_SPEED") {
+        cal.strike.aim_bat_speed = pair(&v);
     }
     if std::env::var("PLANE_ALONE").is_ok() {
         cal.strike.hit_depth_x = None;

@@ -12,7 +12,13 @@
 //! a quasi-Newton step (Broyden's update of a finite-difference Jacobian)
 //! moves (θ, ψ) so the landing point meets the target. A return that would
 //! not clear the net by [`NET_CLEARANCE`] is re-aimed [`DEEPER`] further
-//! back. θ stays within `strike.aim_tilt_deg`.
+//! back, and so is one that would not clear it were the ball's spin
+//! [`NET_SPIN_SIGMAS`] σ above its estimate (σ of ln(spin): the spin
+//! prior's spread for the ball, or the camera's): a saturated lift reads
+//! fast spin low, and more backspin than the aim knew drops the return
+//! into the net. Where no face lands the target so moved back, the
+//! deepest clear landing found is the aim. θ stays within
+//! `strike.aim_tilt_deg`.
 //!
 //! Where the arm is known ([`AimBounds::within`], from the estimator's
 //! [`ReachMap`]), θ also stays within the tilts the arm can present at the
@@ -62,6 +68,11 @@ pub(crate) const AIM_TOLERANCE: f64 = 0.03;
 /// ball's spin read low sends it long: 5 cm returned more than 10 cm in
 /// every world measured (`docs/physics.md`, § The racket).
 pub(crate) const NET_CLEARANCE: f64 = 0.05;
+/// How far above its estimate, in σ of ln(spin) (the spin prior's spread
+/// for the ball, or the camera's), the spin may be and a return still clear
+/// the net by [`NET_CLEARANCE`]: more backspin drops the return, and where
+/// the lift saturates the flight reads fast spin low.
+pub(crate) const NET_SPIN_SIGMAS: f64 = 1.0;
 /// How much further back a return that grazes the net is aimed, m.
 pub(crate) const DEEPER: f64 = 0.25;
 /// A landing this close to the target that does not clear the net moves
@@ -163,10 +174,11 @@ impl Searches {
         prop: &Propagator,
         racket: &RacketModel,
         ball: &BallState,
+        spin_sigma: f64,
         tilt0: f64,
         budget: usize,
     ) -> Aim {
-        let mut a = aim(bounds, target, prop, racket, ball, tilt0, self.current.as_ref(), budget);
+        let mut a = aim(bounds, target, prop, racket, ball, spin_sigma, tilt0, self.current.as_ref(), budget);
         if a.level == 0 && a.target == target {
             *self = Searches { current: Some(a), ..Searches::default() };
             return a;
@@ -176,7 +188,7 @@ impl Searches {
             self.fresh_for = Some(*ball);
         }
         if self.fresh.is_some() || again {
-            let f = aim(bounds, target, prop, racket, ball, tilt0, self.fresh.as_ref(), budget);
+            let f = aim(bounds, target, prop, racket, ball, spin_sigma, tilt0, self.fresh.as_ref(), budget);
             let flights = a.flights + f.flights;
             // It takes over where it lands the ball with a slower bat (or
             // the other has not landed it); it gives way where it lands it
@@ -407,9 +419,10 @@ fn near(a: &BallState, b: &BallState, times: f64) -> bool {
 }
 
 /// Aims the return of `ball` (the predicted state at the hit) at
-/// `target` (x, y in T): resumes the search of `warm` (the last aim for
-/// this ball) or starts one from tilt `tilt0` and the heading at the
-/// target, and flies at most `budget` returns (at least 3 for a start);
+/// `target` (x, y in T), its spin known to `spin_sigma` (σ of ln(spin);
+/// 0: exactly): resumes the search of `warm` (the last aim for this
+/// ball) or starts one from tilt `tilt0` and the heading at the target,
+/// and flies at most `budget` returns (at least 3 for a start);
 /// an aim not yet converged is the best face found so far, and the next
 /// call goes on from where this one stopped.
 #[allow(clippy::too_many_arguments)]
@@ -419,6 +432,7 @@ pub fn aim(
     prop: &Propagator,
     racket: &RacketModel,
     ball: &BallState,
+    spin_sigma: f64,
     tilt0: f64,
     warm: Option<&Aim>,
     budget: usize,
@@ -431,6 +445,7 @@ pub fn aim(
         return Aim { flights: 0, ..*w };
     }
     let clamp = |p: [f64; 2]| [p[0].clamp(lo, hi), p[1].clamp(-MAX_HEADING, MAX_HEADING)];
+    let configured = target;
     let mut target = warm.map_or(target, |w| w.target);
     let start = |target: &[f64; 2]| clamp([tilt0, (ball.pos.y - target[1]).atan2(ball.pos.x - target[0])]);
     let (mut p, mut level, mut jac, mut tries) =
@@ -449,6 +464,10 @@ pub fn aim(
     let mut best: Option<(f64, [f64; 2], usize, Landing)> = warm.and_then(|w| w.best);
     let mut converged = false;
     let mut restarted = false;
+    // A face that lands the estimate, found by this call before the spin
+    // that may be more than it moved the target back (face, speed step,
+    // landing).
+    let mut landed: Option<([f64; 2], usize, Landing)> = None;
     while left > 0 {
         let now = *here.get_or_insert_with(|| fly_at(&p, level, &mut left, &mut flown));
         let j = match jac {
@@ -482,6 +501,23 @@ pub fn aim(
             best = Some((err, p, level, l));
         }
         if clear && err < AIM_TOLERANCE {
+            // The spin may be more than its estimate (a saturated lift reads
+            // it low): a backspin return must clear the net with that too.
+            let deeper = target[0] - DEEPER > -prop.table.length / 2.0;
+            if spin_sigma > 0.0 && deeper {
+                if left == 0 {
+                    break;
+                }
+                let more = BallState { spin: ball.spin * (NET_SPIN_SIGMAS * spin_sigma).exp(), ..*ball };
+                left -= 1;
+                flown += 1;
+                let l = landing(prop, racket, &more, p[0], p[1], bounds.speed(level, p[0]));
+                if l.is_none_or(|l| l.over_net < NET_CLEARANCE) {
+                    landed = now.map(|l| (p, level, l));
+                    target[0] -= DEEPER;
+                    continue;
+                }
+            }
             converged = true;
             // This speed does it: its count starts again.
             tries = 0;
@@ -509,6 +545,18 @@ pub fn aim(
         let step = [next[0] - p[0], next[1] - p[1]];
         let norm2 = step[0] * step[0] + step[1] * step[1];
         let last = level + 1 >= SPEED_STEPS;
+        if last
+            && d[0] != 0.0
+            && step[0] == 0.0
+            && target[0] < configured[0]
+            && let Some((_, face, at, l)) = best
+            && l.x > -prop.table.length / 2.0
+        {
+            // A target moved back that no face reaches (the fastest bat,
+            // the tilt against its bound): the deepest clear landing found.
+            (p, level, here, converged) = (face, at, Some(Some(l)), true);
+            break;
+        }
         if norm2 < 1e-12 || (tries + flown >= LEVEL_FLIGHTS && !last) {
             // Out of reach, against a bound, or not landing it after
             // LEVEL_FLIGHTS: a faster bat, from the start. The fastest
@@ -550,12 +598,13 @@ pub fn aim(
     }
     let unknown = Landing { x: f64::NAN, y: f64::NAN, over_net: f64::NEG_INFINITY };
     // The face: where the search converged; until it does again, the last
-    // converged one (it landed a ball very like this one); before any, the
-    // nearest clear landing found, or the start.
-    let settled = converged || warm.is_some_and(|w| w.settled);
-    let (face, out_level, landing) = match (converged, warm) {
-        (true, _) => (p, level, here.flatten().unwrap_or(unknown)),
-        (false, Some(w)) if w.settled => ([w.tilt, w.heading], w.speed_step, w.landing),
+    // one that landed the estimate (it landed a ball very like this one);
+    // before any, the nearest clear landing found, or the start.
+    let settled = converged || landed.is_some() || warm.is_some_and(|w| w.settled);
+    let (face, out_level, landing) = match (converged, landed, warm) {
+        (true, _, _) => (p, level, here.flatten().unwrap_or(unknown)),
+        (false, Some(l), _) => l,
+        (false, None, Some(w)) if w.settled => ([w.tilt, w.heading], w.speed_step, w.landing),
         _ => best.map_or((start(&target), 0, unknown), |(_, bp, bl, l)| (bp, bl, l)),
     };
     Aim {
@@ -613,7 +662,7 @@ mod tests {
     fn the_aimed_return_lands_on_the_target_in_the_full_physics() {
         let (bounds, target, prop, racket) = cell();
         for b in balls() {
-            let a = aim(&bounds, target, &prop, &racket, &b, tilt0(&b), None, 64);
+            let a = aim(&bounds, target, &prop, &racket, &b, 0.0, tilt0(&b), None, 64);
             assert!(a.converged, "{a:?} for {b:?}");
             // Fly it with the propagator itself (4 ms, events): it clears the
             // net and bounces within 5 cm of the target.
@@ -634,8 +683,8 @@ mod tests {
     fn topspin_gets_a_closed_face_backspin_an_open_one_and_a_faster_bat() {
         let (bounds, target, prop, racket) = cell();
         let b = balls();
-        let top = aim(&bounds, target, &prop, &racket, &b[0], tilt0(&b[0]), None, 64);
-        let back = aim(&bounds, target, &prop, &racket, &b[1], tilt0(&b[1]), None, 64);
+        let top = aim(&bounds, target, &prop, &racket, &b[0], 0.0, tilt0(&b[0]), None, 64);
+        let back = aim(&bounds, target, &prop, &racket, &b[1], 0.0, tilt0(&b[1]), None, 64);
         assert!(
             top.tilt < -0.3 && back.tilt > 0.3,
             "top {:.1}°, back {:.1}°",
@@ -646,20 +695,47 @@ mod tests {
         assert!(top.speed < back.speed, "{top:?} {back:?}");
         // A ball on the +y side is sent back towards the middle: the face
         // turns towards −y (ψ > 0), and from −y towards +y.
-        let plus = aim(&bounds, target, &prop, &racket, &b[3], tilt0(&b[3]), None, 64);
-        let minus = aim(&bounds, target, &prop, &racket, &b[4], tilt0(&b[4]), None, 64);
+        let plus = aim(&bounds, target, &prop, &racket, &b[3], 0.0, tilt0(&b[3]), None, 64);
+        let minus = aim(&bounds, target, &prop, &racket, &b[4], 0.0, tilt0(&b[4]), None, 64);
         assert!(plus.heading > 0.0 && minus.heading < 0.0, "{plus:?} {minus:?}");
+    }
+
+    #[test]
+    fn a_backspin_return_clears_the_net_with_the_spin_it_may_have_above_its_estimate() {
+        let (bounds, target, prop, racket) = cell();
+        let back = balls()[1];
+        let sigma = 0.25;
+        let sure = aim(&bounds, target, &prop, &racket, &back, 0.0, tilt0(&back), None, 64);
+        let unsure = aim(&bounds, target, &prop, &racket, &back, sigma, tilt0(&back), None, 64);
+        let more = BallState { spin: back.spin * sigma.exp(), ..back };
+        let over_net = |a: &Aim, b: &BallState| {
+            landing(&prop, &racket, b, a.tilt, a.heading, a.speed).map_or(f64::NEG_INFINITY, |l| l.over_net)
+        };
+        // Aimed for the estimate alone, a ball with e^σ times the backspin
+        // goes into the net. Aimed so that it clears it, the face opens
+        // and the target moves back until no face lands it deeper: the
+        // face is the deepest that landed the estimate, and that ball
+        // clears the net.
+        assert!(sure.converged && over_net(&sure, &more) < 0.0, "{sure:?}");
+        assert!(over_net(&unsure, &more) > 0.0, "{unsure:?}");
+        assert!(unsure.tilt > sure.tilt && unsure.target[0] < sure.target[0], "{sure:?} {unsure:?}");
+        let l = unsure.landing;
+        assert!(l.x < sure.landing.x - 0.2 && l.x > -prop.table.length / 2.0 && l.over_net >= NET_CLEARANCE, "{l:?}");
+        // Topspin: more spin lifts the return; the target stays.
+        let top = balls()[0];
+        let a = aim(&bounds, target, &prop, &racket, &top, sigma, tilt0(&top), None, 64);
+        assert!(a.converged && a.target == target, "{a:?}");
     }
 
     #[test]
     fn a_refinement_starts_from_the_last_aim() {
         let (bounds, target, prop, racket) = cell();
         let b = balls()[0];
-        let first = aim(&bounds, target, &prop, &racket, &b, tilt0(&b), None, 64);
+        let first = aim(&bounds, target, &prop, &racket, &b, 0.0, tilt0(&b), None, 64);
         let mut moved = b;
         moved.pos.z += 0.01;
         moved.vel.x += 0.05;
-        let again = aim(&bounds, target, &prop, &racket, &moved, tilt0(&moved), Some(&first), AIM_BUDGET);
+        let again = aim(&bounds, target, &prop, &racket, &moved, 0.0, tilt0(&moved), Some(&first), AIM_BUDGET);
         assert!(again.converged);
         assert!((again.tilt - first.tilt).abs() < 0.05);
         assert_eq!(again.speed_step, first.speed_step);
@@ -673,18 +749,18 @@ mod tests {
         let heavy = BallState::new(Vec3::new(1.6, 0.0, 0.16), Vec3::new(2.0, 0.0, -1.0), Vec3::new(0.0, -900.0, 0.0));
         let mut searches = Searches::default();
         for _ in 0..40 {
-            searches.step(&bounds, target, &prop, &racket, &heavy, tilt0(&heavy), AIM_BUDGET);
+            searches.step(&bounds, target, &prop, &racket, &heavy, 0.0, tilt0(&heavy), AIM_BUDGET);
         }
         let climbed = searches.current.expect("aimed");
         assert_eq!(climbed.level + 1, SPEED_STEPS, "{climbed:?}");
         // The prediction moves to a ball a slower bat lands.
         let b = balls()[0];
-        let cold = aim(&bounds, target, &prop, &racket, &b, tilt0(&b), None, 64);
+        let cold = aim(&bounds, target, &prop, &racket, &b, 0.0, tilt0(&b), None, 64);
         assert!(cold.converged && cold.speed_step + 1 < SPEED_STEPS, "{cold:?}");
         let (mut alone, mut both) = (climbed, climbed);
         for _ in 0..20 {
-            alone = aim(&bounds, target, &prop, &racket, &b, tilt0(&b), Some(&alone), AIM_BUDGET);
-            both = searches.step(&bounds, target, &prop, &racket, &b, tilt0(&b), AIM_BUDGET);
+            alone = aim(&bounds, target, &prop, &racket, &b, 0.0, tilt0(&b), Some(&alone), AIM_BUDGET);
+            both = searches.step(&bounds, target, &prop, &racket, &b, 0.0, tilt0(&b), AIM_BUDGET);
         }
         // The search alone stays at the bat it climbed to; beside a fresh
         // one, the plan gets the slower bat's face, within each plan's
@@ -706,12 +782,12 @@ mod tests {
         // Heavy backspin, slow and low: the search ends against the open
         // bound at the fastest bat, without landing it.
         let heavy = BallState::new(Vec3::new(1.6, 0.0, 0.16), Vec3::new(2.0, 0.0, -1.0), Vec3::new(0.0, -900.0, 0.0));
-        let stuck = aim(&bounds, target, &prop, &racket, &heavy, tilt0(&heavy), None, 64);
+        let stuck = aim(&bounds, target, &prop, &racket, &heavy, 0.0, tilt0(&heavy), None, 64);
         assert!(!stuck.converged && stuck.level + 1 == SPEED_STEPS, "{stuck:?}");
         // The prediction moves to a ball the start face lands: the search
         // leaves the bound and lands it, not the face found for the other.
         let b = balls()[3];
-        let again = aim(&bounds, target, &prop, &racket, &b, tilt0(&b), Some(&stuck), 64);
+        let again = aim(&bounds, target, &prop, &racket, &b, 0.0, tilt0(&b), Some(&stuck), 64);
         assert!(again.converged, "{again:?}");
     }
 
@@ -735,7 +811,7 @@ mod tests {
             for k in 0..6 {
                 let mut s = b;
                 s.spin *= 1.0 + 0.02 * k as f64;
-                let a = aim(&bounds, target, &prop, &racket, &s, tilt0(&s), warm.as_ref(), AIM_BUDGET);
+                let a = aim(&bounds, target, &prop, &racket, &s, 0.0, tilt0(&s), warm.as_ref(), AIM_BUDGET);
                 assert!(a.flights <= AIM_BUDGET, "{a:?}");
                 warm = Some(a);
             }
@@ -748,7 +824,7 @@ mod tests {
         let (bounds, target, prop, racket) = cell();
         // Heavy backspin, slow and low: wants more than the bounds give.
         let b = BallState::new(Vec3::new(1.6, 0.0, 0.16), Vec3::new(2.0, 0.0, -1.0), Vec3::new(0.0, -900.0, 0.0));
-        let a = aim(&bounds, target, &prop, &racket, &b, tilt0(&b), None, 64);
+        let a = aim(&bounds, target, &prop, &racket, &b, 0.0, tilt0(&b), None, 64);
         assert!(a.tilt >= bounds.tilt.0 && a.tilt <= bounds.tilt.1, "{a:?}");
         assert!(a.heading.abs() <= MAX_HEADING && a.speed <= bounds.speed.1, "{a:?}");
     }

@@ -825,7 +825,8 @@ impl Estimator {
                 };
                 // The return flies with the spin the rubber gave it.
                 let prop = Propagator { bounce: track.prop.bounce.with_spin_scale(1.0), ..track.prop };
-                let a = track.aim.step(&bounds, target, &prop, &self.racket, &hit_state, tilt0, aim::AIM_BUDGET);
+                let sigma = track.ekf.noise.bounce_spin_share;
+                let a = track.aim.step(&bounds, target, &prop, &self.racket, &hit_state, sigma, tilt0, aim::AIM_BUDGET);
                 let roll = match bounds.arm {
                     Some(arm) => arm.roll(a.tilt),
                     None => stroke::bat_roll(&self.strike, hit.state.pos.y),

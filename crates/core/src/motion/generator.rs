@@ -66,8 +66,8 @@ use rsruckig::prelude::*;
 use super::MotionLimits;
 use super::blend::Blend;
 use super::margins::{
-    JERK_RAMP_S, JOINT_LIMIT_FRACTION, ORIENTATION_MARGIN_RAD, PATH_LIMIT_MARGIN_RAD, PATH_WALL_MARGIN_M,
-    PATH_WRIST_MARGIN, VELOCITY_STEP_S, WRIST_MARGIN,
+    JERK_RAMP_S, JOINT_LIMIT_FRACTION, ORIENTATION_MARGIN_RAD, PATH_LIMIT_MARGIN_RAD, PATH_ORIENTATION_MARGIN_RAD,
+    PATH_WALL_MARGIN_M, PATH_WRIST_MARGIN, VELOCITY_STEP_S, WRIST_MARGIN,
 };
 use super::reach;
 use crate::geometry::{Pose6, unwrap_near};
@@ -600,13 +600,16 @@ impl StrokeGenerator {
     }
 
     /// The TCP at joints `q` is [`PATH_WALL_MARGIN_M`] inside the workspace
-    /// box and inside its orientation range, the limits the safety filter
-    /// brakes at.
+    /// box and [`PATH_ORIENTATION_MARGIN_RAD`] inside its orientation range,
+    /// the limits the safety filter brakes at.
     fn in_workspace(&self, q: &Joints) -> bool {
         let p = self.lim.arm.tcp(q).to_pose6();
         (0..6).all(|i| {
-            let (v, margin) =
-                if i < 3 { (p[i], PATH_WALL_MARGIN_M) } else { (unwrap_near(p[i], self.lim.home[i]), 0.0) };
+            let (v, margin) = if i < 3 {
+                (p[i], PATH_WALL_MARGIN_M)
+            } else {
+                (unwrap_near(p[i], self.lim.home[i]), PATH_ORIENTATION_MARGIN_RAD)
+            };
             v >= self.lim.lo[i] + margin && v <= self.lim.hi[i] - margin
         })
     }

@@ -31,6 +31,13 @@ pub(crate) const PATH_LIMIT_MARGIN_RAD: f64 = 2.0 * std::f64::consts::PI / 180.0
 /// to ~0.6 mm where it turns (a run-up's far end).
 pub(crate) const PATH_WALL_MARGIN_M: f64 = 0.002;
 
+/// How far inside the workspace's orientation range a stroke's path keeps
+/// the bat at the generator's path checks, rad: the safety filter brakes
+/// an angle that nears its bound at speed, and between two checks the
+/// blade turns on by up to a degree (a path that touched 45.0° of roll
+/// was braked there).
+pub(crate) const PATH_ORIENTATION_MARGIN_RAD: f64 = 2.0 * std::f64::consts::PI / 180.0;
+
 /// A stroke's face keeps this far inside the workspace's orientation
 /// range (`workspace.abc_range_deg`), rad: the joint-space path into and
 /// out of the hitting pose turns the bat on past it, and the safety filter
