@@ -334,8 +334,14 @@ impl SpinPrior {
         for c in costs.iter().flatten() {
             let (lo, hi) = fitting(c);
             let own = own_scale(c, bin.scale);
-            let open = if hi == SCALE_GRID - 1 { 0.0 } else { 0.5 * (grid(hi) / grid(lo)).ln() };
-            sum += (own / bin.scale).ln().powi(2) - open * open;
+            sum += if hi == SCALE_GRID - 1 {
+                // Bounded from below only: it tells nothing of how far a
+                // ball strays above the bin (the start's spread).
+                (own / bin.scale).ln().powi(2).max(SHARE_START * SHARE_START)
+            } else {
+                let open = 0.5 * (grid(hi) / grid(lo)).ln();
+                (own / bin.scale).ln().powi(2) - open * open
+            };
             n += 1;
         }
         if n >= MIN_FOR_SHARE {
