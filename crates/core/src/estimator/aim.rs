@@ -447,6 +447,9 @@ pub fn aim(
     let clamp = |p: [f64; 2]| [p[0].clamp(lo, hi), p[1].clamp(-MAX_HEADING, MAX_HEADING)];
     let configured = target;
     let mut target = warm.map_or(target, |w| w.target);
+    // The end line, and whether a target can move back once more before it.
+    let end_line = -prop.table.length / 2.0;
+    let room_behind = |t: &[f64; 2]| t[0] - DEEPER > end_line;
     let start = |target: &[f64; 2]| clamp([tilt0, (ball.pos.y - target[1]).atan2(ball.pos.x - target[0])]);
     let (mut p, mut level, mut jac, mut tries) =
         warm.map_or((start(&target), 0, None, 0), |w| (w.search, w.level, w.jacobian, w.tries));
@@ -488,7 +491,7 @@ pub fn aim(
         let f = point(&now);
         let clear = now.is_some_and(|l| l.over_net >= NET_CLEARANCE);
         let mut res = [f[0] - target[0], f[1] - target[1]];
-        if !clear && res[0].hypot(res[1]) < RETARGET_NEAR && target[0] - DEEPER > -prop.table.length / 2.0 {
+        if !clear && res[0].hypot(res[1]) < RETARGET_NEAR && room_behind(&target) {
             // On target but under (or into) the net: aim further back.
             target[0] -= DEEPER;
             res[0] += DEEPER;
@@ -503,8 +506,7 @@ pub fn aim(
         if clear && err < AIM_TOLERANCE {
             // The spin may be more than its estimate (a saturated lift reads
             // it low): a backspin return must clear the net with that too.
-            let deeper = target[0] - DEEPER > -prop.table.length / 2.0;
-            if spin_sigma > 0.0 && deeper {
+            if spin_sigma > 0.0 && room_behind(&target) {
                 if left == 0 {
                     break;
                 }
@@ -550,7 +552,7 @@ pub fn aim(
             && step[0] == 0.0
             && target[0] < configured[0]
             && let Some((_, face, at, l)) = best
-            && l.x > -prop.table.length / 2.0
+            && l.x > end_line
         {
             // A target moved back that no face reaches (the fastest bat,
             // the tilt against its bound): the deepest clear landing found.
