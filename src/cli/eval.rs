@@ -11,7 +11,7 @@ use super::BadInput;
 use super::fit::{PhysicsChoice, load_calibration};
 use topspin_core::stats::Summary;
 use topspin_lab::eval::fit::{MethodRow, Window, accuracy, outlier_experiment};
-use topspin_lab::eval::stream::{LeadRow, StreamSetup, evaluate, evaluate_worlds};
+use topspin_lab::eval::stream::{LeadRow, StreamSetup, TypeTiming, evaluate, evaluate_worlds};
 use topspin_lab::eval::worlds;
 use topspin_sim::TrackerModel;
 use topspin_sim::simulate_set;
@@ -325,23 +325,30 @@ fn run_stream(a: EvalStreamArgs) -> anyhow::Result<()> {
     println!(
         "\nThe EKF's signed hit-time error per ball type (plan − truth, ms: positive is late), median and \
          90th percentile, split by the plan made before or after the true bounce (median, number of balls), \
-         and the median time of the plan after the bounce:\n"
+         the median time of the plan after the bounce, and for the plans made before it, the forward kick \
+         the plan predicted the table to give (the ball's gain in v_x) less the true kick, median (p90 of \
+         its size), m/s:\n"
     );
-    println!("| lead | ball | all: median (p90) | before the bounce | after it | plan − bounce ms |");
-    println!("|---|---|---|---|---|---|");
-    let signed = |s: &topspin_core::stats::Summary| {
+    println!("| lead | ball | all: median (p90) | before the bounce | after it | plan − bounce ms | kick err m/s |");
+    println!("|---|---|---|---|---|---|---|");
+    let signed = |s: &Summary| {
         if s.n == 0 { "–".to_owned() } else { format!("{:+.1} ({})", s.median, s.n) }
+    };
+    let kick = |r: &TypeTiming| {
+        let (s, size) = (&r.kick_err_m_s, &r.kick_miss_m_s);
+        if s.n == 0 { "–".to_owned() } else { format!("{:+.2} ({:.2})", s.median, size.p90) }
     };
     for r in &report.timing {
         println!(
-            "| {:.2} s | {} | {:+.1} ({:+.1}) | {} | {} | {:+.0} |",
+            "| {:.2} s | {} | {:+.1} ({:+.1}) | {} | {} | {:+.0} | {} |",
             r.lead_s,
             r.setting,
             r.signed_dt_ms.median,
             r.signed_dt_ms.p90,
             signed(&r.before_bounce_ms),
             signed(&r.after_bounce_ms),
-            r.plan_after_bounce_ms.median
+            r.plan_after_bounce_ms.median,
+            kick(r)
         );
     }
     let l = &report.learned;
