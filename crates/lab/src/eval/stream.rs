@@ -127,9 +127,10 @@ pub struct TypeTiming {
     /// When the plan was made relative to the true bounce, ms (negative:
     /// before it).
     pub plan_after_bounce_ms: Summary,
-    /// Plans made before the bounce: the forward kick the table gives the
-    /// ball (its gain in v_x at the contact) as predicted, less the true
-    /// kick, m/s (negative: predicted too small, the plan late).
+    /// Plans whose prediction still had the bounce ahead: the forward
+    /// kick the table gives the ball (its gain in v_x at the contact) as
+    /// predicted, less the true kick, m/s (negative: predicted too small,
+    /// the plan late).
     pub kick_err_m_s: Summary,
     /// The size of that error, m/s.
     pub kick_miss_m_s: Summary,
@@ -140,6 +141,7 @@ pub struct TypeTiming {
 pub(crate) struct Planned {
     /// Index of the ball in the stream.
     pub ball: usize,
+    /// The plan itself.
     pub plan: StrikePlan,
     /// The forward kick of the bounce still ahead in the plan's
     /// prediction (gain in v_x at the contact, m/s); `None` after it.
