@@ -455,10 +455,11 @@ pub fn aim(
         warm.map_or((start(&target), 0, None, 0), |w| (w.search, w.level, w.jacobian, w.tries));
     let mut left = budget;
     let mut flown = 0;
-    let fly_at = |p: &[f64; 2], level: usize, left: &mut usize, flown: &mut usize| {
+    // Flies the return of `b` off face `p` at speed step `level`, counted.
+    let fly = |b: &BallState, p: &[f64; 2], level: usize, left: &mut usize, flown: &mut usize| {
         *left = left.saturating_sub(1);
         *flown += 1;
-        landing(prop, racket, ball, p[0], p[1], bounds.speed(level, p[0]))
+        landing(prop, racket, b, p[0], p[1], bounds.speed(level, p[0]))
     };
     // A landing as a point (no contact: nowhere useful, far along +x).
     let point = |l: &Option<Landing>| l.map_or([100.0, 0.0], |l| [l.x, l.y]);
@@ -472,13 +473,13 @@ pub fn aim(
     // landing).
     let mut landed: Option<([f64; 2], usize, Landing)> = None;
     while left > 0 {
-        let now = *here.get_or_insert_with(|| fly_at(&p, level, &mut left, &mut flown));
+        let now = *here.get_or_insert_with(|| fly(ball, &p, level, &mut left, &mut flown));
         let j = match jac {
             Some(j) => j,
             None if left >= 2 => {
                 let f0 = point(&now);
-                let ft = point(&fly_at(&[p[0] + FD_STEP, p[1]], level, &mut left, &mut flown));
-                let fh = point(&fly_at(&[p[0], p[1] + FD_STEP], level, &mut left, &mut flown));
+                let ft = point(&fly(ball, &[p[0] + FD_STEP, p[1]], level, &mut left, &mut flown));
+                let fh = point(&fly(ball, &[p[0], p[1] + FD_STEP], level, &mut left, &mut flown));
                 let j = [
                     [(ft[0] - f0[0]) / FD_STEP, (fh[0] - f0[0]) / FD_STEP],
                     [(ft[1] - f0[1]) / FD_STEP, (fh[1] - f0[1]) / FD_STEP],
@@ -511,9 +512,7 @@ pub fn aim(
                     break;
                 }
                 let more = BallState { spin: ball.spin * (NET_SPIN_SIGMAS * spin_sigma).exp(), ..*ball };
-                left -= 1;
-                flown += 1;
-                let l = landing(prop, racket, &more, p[0], p[1], bounds.speed(level, p[0]));
+                let l = fly(&more, &p, level, &mut left, &mut flown);
                 if l.is_none_or(|l| l.over_net < NET_CLEARANCE) {
                     landed = now.map(|l| (p, level, l));
                     target[0] -= DEEPER;
@@ -583,7 +582,7 @@ pub fn aim(
             flown = 0;
             continue;
         }
-        let there = fly_at(&next, level, &mut left, &mut flown);
+        let there = fly(ball, &next, level, &mut left, &mut flown);
         let g = point(&there);
         // Broyden: J += (Δf − J Δp) Δpᵀ / |Δp|².
         let df = [g[0] - f[0], g[1] - f[1]];
