@@ -14,7 +14,8 @@
 //! not clear the net by [`NET_CLEARANCE`] is re-aimed [`DEEPER`] further
 //! back, and so is one that would not clear it were the ball's spin
 //! [`NET_SPIN_SIGMAS`] σ above its estimate (σ of ln(spin): the spin
-//! prior's spread for the ball, or the camera's): a saturated lift reads
+//! prior's hedge for the ball, wider while the session is new, or the
+//! camera's): a saturated lift reads
 //! fast spin low, and more backspin than the aim knew drops the return
 //! into the net. Where no face lands the target so moved back, the
 //! deepest clear landing found is the aim. θ stays within
@@ -68,7 +69,7 @@ pub(crate) const AIM_TOLERANCE: f64 = 0.03;
 /// ball's spin read low sends it long: 5 cm returned more than 10 cm in
 /// every world measured (`docs/physics.md`, § The racket).
 pub(crate) const NET_CLEARANCE: f64 = 0.05;
-/// How far above its estimate, in σ of ln(spin) (the spin prior's spread
+/// How far above its estimate, in σ of ln(spin) (the spin prior's hedge
 /// for the ball, or the camera's), the spin may be and a return still clear
 /// the net by [`NET_CLEARANCE`]: more backspin drops the return, and where
 /// the lift saturates the flight reads fast spin low.

@@ -38,7 +38,7 @@ use crate::time::Instant;
 pub use aim::{Aim, AimBounds, ArmReach, Landing, aim, bat_velocity, face_normal};
 pub use ekf::{Ekf, EkfNoise, Update};
 pub use session::{LearnConfig, Learned, LearnedSession};
-pub use spin_prior::{SPIN_BIN_CENTRES, SPIN_BINS, SpinPrior};
+pub use spin_prior::{BallScale, SPIN_BIN_CENTRES, SPIN_BINS, SpinPrior};
 pub use stroke::{Withheld, paper_beta};
 
 /// Observations collected before a candidate becomes a track.
@@ -296,6 +296,9 @@ struct Track {
     /// Speed at the first sample of the track, m/s: what the session's
     /// spin prior weighs alike balls by (the same point of every flight).
     speed0: f64,
+    /// σ of ln(spin) the aim allows above the estimate: the camera's, or
+    /// the session's for this ball ([`BallScale::hedge`]).
+    spin_hedge: f64,
 }
 
 /// A logo spin more than this far from the flight's own spin direction is
@@ -612,10 +615,12 @@ impl Estimator {
             + along * self.cfg.spin_prior_along_velocity.powi(2);
         ekf.p.fixed_view_mut::<3, 3>(6, 6).copy_from(&spin_cov);
         let mut prop = self.session_propagator();
+        let mut spin_hedge = ekf.noise.bounce_spin_share;
         if self.cfg.learn.enabled && self.cfg.learn.spin {
-            let (k, share) = self.session.spin.ball_scale(&ekf.state(), prop.bounce.radius, state.vel.norm());
-            prop.bounce = prop.bounce.with_spin_scale(k);
-            ekf.noise.bounce_spin_share = share;
+            let b = self.session.spin.ball_scale(&ekf.state(), prop.bounce.radius, state.vel.norm());
+            prop.bounce = prop.bounce.with_spin_scale(b.scale);
+            ekf.noise.bounce_spin_share = b.share;
+            spin_hedge = b.hedge;
         }
         for s in &inliers {
             ekf.predict(&prop, s.t);
@@ -645,6 +650,7 @@ impl Estimator {
             target: self.strike.aim_target_for(id, inliers[0].pos.y),
             logo: None,
             speed0: state.vel.norm(),
+            spin_hedge,
         });
         out.push(EstimatorEvent::Started { trajectory: id, t: last.t, start_outliers: outliers.len() as u8 });
         self.plan(last.t, out);
@@ -665,10 +671,12 @@ impl Estimator {
             {
                 track.prop.bounce = track.prop.bounce.with_spin_scale(k);
                 track.ekf.noise.bounce_spin_share = sigma;
+                track.spin_hedge = sigma;
             } else if cfg.learn.enabled && cfg.learn.spin {
-                let (k, share) = self.session.spin.ball_scale(&state, self.prop.bounce.radius, track.speed0);
-                track.prop.bounce = track.prop.bounce.with_spin_scale(k);
-                track.ekf.noise.bounce_spin_share = share;
+                let b = self.session.spin.ball_scale(&state, self.prop.bounce.radius, track.speed0);
+                track.prop.bounce = track.prop.bounce.with_spin_scale(b.scale);
+                track.ekf.noise.bounce_spin_share = b.share;
+                track.spin_hedge = b.hedge;
             }
         }
         let mut trial = track.ekf;
@@ -825,8 +833,16 @@ impl Estimator {
                 };
                 // The return flies with the spin the rubber gave it.
                 let prop = Propagator { bounce: track.prop.bounce.with_spin_scale(1.0), ..track.prop };
-                let sigma = track.ekf.noise.bounce_spin_share;
-                let a = track.aim.step(&bounds, target, &prop, &self.racket, &hit_state, sigma, tilt0, aim::AIM_BUDGET);
+                let a = track.aim.step(
+                    &bounds,
+                    target,
+                    &prop,
+                    &self.racket,
+                    &hit_state,
+                    track.spin_hedge,
+                    tilt0,
+                    aim::AIM_BUDGET,
+                );
                 let roll = match bounds.arm {
                     Some(arm) => arm.roll(a.tilt),
                     None => stroke::bat_roll(&self.strike, hit.state.pos.y),

@@ -39,6 +39,15 @@ const COST_CAP: f64 = 16.0;
 /// σ of ln(scale) about a bin's scale before it holds [`MIN_FOR_SHARE`]
 /// bounces: a flight's spin may be a third off (real balls, `docs/physics.md`).
 pub(crate) const SHARE_START: f64 = 0.3;
+/// σ of ln(spin) the aim allows a ball above its estimate
+/// ([`SpinPrior::ball_scale`]) while its bin holds fewer than
+/// [`MIN_FOR_SHARE`] readings. Real balls' flights read 20–40 rev/s at
+/// 0.95 of the truth but 40–80 at 0.53 and faster at 0.31
+/// (`docs/physics.md`): from S 0.4 up, a fresh session's flight may show
+/// half the spin or less. Only the aim takes it (a return that clears the
+/// net with that much more spin); the filter's spread at the contact
+/// stays the bin's, which costs timing where the reading is right.
+pub(crate) const HEDGE_START: [f64; SPIN_BINS] = [SHARE_START, SHARE_START, 0.45, 0.6];
 /// Bounces a bin needs before its own spread counts.
 const MIN_FOR_SHARE: usize = 4;
 /// Bounds of a bin's spread.
@@ -146,6 +155,17 @@ struct Bin {
     share: f64,
 }
 
+/// One ball's spin scale from the session ([`SpinPrior::ball_scale`]).
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub struct BallScale {
+    /// The spin the table meets per unit of the flight's.
+    pub scale: f64,
+    /// σ of ln(scale) the filter adds at the contact.
+    pub share: f64,
+    /// σ of ln(spin) the aim allows above the estimate.
+    pub hedge: f64,
+}
+
 /// The spin scale per bin of the flight's spin parameter.
 #[derive(Copy, Clone, Debug, PartialEq)]
 pub struct SpinPrior {
@@ -186,35 +206,45 @@ impl SpinPrior {
     /// The scale for a flight showing spin parameter `s`: linear between
     /// the bins' centres, the end bins' values beyond them.
     pub fn scale_at(&self, s: f64) -> f64 {
-        self.interpolate(s, |b| b.scale)
+        self.interpolate(s, |_, b| b.scale)
     }
 
     /// How far one ball's scale strays from [`Self::scale_at`], as σ of
     /// its logarithm (the filter's [`super::ekf::EkfNoise::bounce_spin_share`]).
     pub fn share_at(&self, s: f64) -> f64 {
-        self.interpolate(s, |b| b.share)
+        self.interpolate(s, |_, b| b.share)
     }
 
-    /// The scale and spread ([`Self::scale_at`], [`Self::share_at`]) for
-    /// one ball as its flight shows it (`speed`: at the first sample of
-    /// its track): the bin's, weighed against the spin that balls of that
-    /// speed and its lift direction came with, where enough such balls
-    /// were read. A launcher's spin grows with its speed, as a player's
-    /// does; where the lift saturates, a ball's speed tells its spin
-    /// better than its flight.
-    pub fn ball_scale(&self, state: &BallState, radius: f64, speed: f64) -> (f64, f64) {
+    /// How far the aim allows one ball's spin above its bin's scale, as σ
+    /// of ln: the bin's spread, or [`HEDGE_START`] while the bin is new.
+    pub fn hedge_at(&self, s: f64) -> f64 {
+        self.interpolate(s, |k, b| {
+            if b.seen.iter().flatten().count() < MIN_FOR_SHARE { b.share.max(HEDGE_START[k]) } else { b.share }
+        })
+    }
+
+    /// The scale for one ball as its flight shows it (`speed`: at the
+    /// first sample of its track), the spread of its ln that the filter
+    /// adds at the contact ([`Self::scale_at`], [`Self::share_at`]), and
+    /// the one the aim allows for ([`Self::hedge_at`]): the bin's, weighed
+    /// against the spin that balls of that speed and its lift direction
+    /// came with, where enough such balls were read. A launcher's spin
+    /// grows with its speed, as a player's does; where the lift
+    /// saturates, a ball's speed tells its spin better than its flight.
+    pub fn ball_scale(&self, state: &BallState, radius: f64, speed: f64) -> BallScale {
         let s = spin_parameter(state, radius);
-        let (k, share) = (self.scale_at(s), self.share_at(s));
+        let bin = BallScale { scale: self.scale_at(s), share: self.share_at(s), hedge: self.hedge_at(s) };
         let w = state.spin.norm();
         if !(w > 0.0 && w.is_finite()) {
-            return (k, share);
+            return bin;
         }
-        let Some((mean, spread)) = self.spin_by_speed(state, speed) else { return (k, share) };
+        let Some((mean, spread)) = self.spin_by_speed(state, speed) else { return bin };
         // Inverse-variance weighting in ln(spin).
-        let (a, b) = (1.0 / (share * share), 1.0 / (spread * spread));
-        let ln_w = ((w * k).ln() * a + mean * b) / (a + b);
-        let k = (ln_w.exp() / w).clamp(grid(0), grid(SCALE_GRID - 1));
-        (k, (1.0 / (a + b)).sqrt())
+        let (a, b) = (1.0 / (bin.share * bin.share), 1.0 / (spread * spread));
+        let ln_w = ((w * bin.scale).ln() * a + mean * b) / (a + b);
+        let scale = (ln_w.exp() / w).clamp(grid(0), grid(SCALE_GRID - 1));
+        let hedge = (1.0 / (bin.hedge.powi(-2) + b)).sqrt();
+        BallScale { scale, share: (1.0 / (a + b)).sqrt(), hedge }
     }
 
     /// The mean and σ of ln(spin) of the balls of `state`'s speed and
@@ -247,9 +277,9 @@ impl SpinPrior {
         self.by_speed_next = (self.by_speed_next + 1) % SPEED_MEMORY;
     }
 
-    fn interpolate(&self, s: f64, of: impl Fn(&Bin) -> f64) -> f64 {
+    fn interpolate(&self, s: f64, of: impl Fn(usize, &Bin) -> f64) -> f64 {
         let c = &SPIN_BIN_CENTRES;
-        let v = |k: usize| of(&self.bins[k]);
+        let v = |k: usize| of(k, &self.bins[k]);
         if s.is_nan() || s <= c[0] {
             return v(0);
         }
@@ -401,15 +431,37 @@ mod tests {
             assert!(prior.take_logo(&at(v, 300.0), 2.0, 0.05, &table, v));
         }
         assert_eq!(prior.kept_by_speed(), 6);
-        let (k, share) = prior.ball_scale(&at(8.0, 250.0), R, 8.0);
+        let BallScale { scale: k, share, hedge } = prior.ball_scale(&at(8.0, 250.0), R, 8.0);
         let s = spin_parameter(&at(8.0, 250.0), R);
         let (bin_k, bin_share) = (prior.scale_at(s), prior.share_at(s));
         assert!((250.0 * k - 600.0).abs() < 0.1 * 600.0 && share < bin_share, "×{k} σ {share}; bin ×{bin_k}");
-        assert_eq!(before.0, 1.0);
+        assert!(hedge < prior.hedge_at(s), "{hedge}");
+        assert_eq!(before.scale, 1.0);
         let back = at(8.0, -250.0);
-        assert_eq!(prior.ball_scale(&back, R, 8.0).0, prior.scale_at(spin_parameter(&back, R)));
+        assert_eq!(prior.ball_scale(&back, R, 8.0).scale, prior.scale_at(spin_parameter(&back, R)));
         let slow = at(5.0, 250.0);
-        assert_eq!(prior.ball_scale(&slow, R, 5.0).0, prior.scale_at(spin_parameter(&slow, R)));
+        assert_eq!(prior.ball_scale(&slow, R, 5.0).scale, prior.scale_at(spin_parameter(&slow, R)));
+    }
+
+    /// A new session allows fast spin twice the flight's reading in the
+    /// aim (the real balls' flights read it at 0.3–0.5), slow spin a third
+    /// more; once a bin holds enough readings, its own spread.
+    #[test]
+    fn a_new_bin_hedges_fast_spin_until_it_has_readings() {
+        let table = BounceModel::new(0.92, 0.2, R);
+        let mut prior = SpinPrior::default();
+        assert_eq!([prior.hedge_at(0.05), prior.hedge_at(0.8), prior.hedge_at(2.0)], [SHARE_START, 0.6, 0.6]);
+        assert!((prior.hedge_at(0.6) - 0.525).abs() < 1e-12);
+        assert_eq!(prior.shares(), [SHARE_START; SPIN_BINS]);
+        let fast = BallState::new(Vec3::zeros(), Vec3::new(6.0, 0.0, -2.0), Vec3::new(0.0, 240.0, 0.0));
+        assert!((spin_parameter(&fast, R) - 0.76).abs() < 0.01);
+        for k in 0..MIN_FOR_SHARE {
+            assert!(prior.take_logo(&fast, 2.0 + 0.01 * k as f64, 0.05, &table, 6.0));
+        }
+        let share = prior.shares()[3];
+        assert!(share < 0.1, "{share}");
+        assert!((prior.hedge_at(0.8) - share).abs() < 1e-12);
+        assert!((prior.hedge_at(0.2) - SHARE_START).abs() < 1e-12);
     }
 
     /// Fast topspin that slides at the contact, shown at a third of its
