@@ -443,9 +443,9 @@ mod tests {
         assert_eq!(prior.ball_scale(&slow, R, 5.0).scale, prior.scale_at(spin_parameter(&slow, R)));
     }
 
-    /// A new session allows fast spin twice the flight's reading in the
-    /// aim (the real balls' flights read it at 0.3–0.5), slow spin a third
-    /// more; once a bin holds enough readings, its own spread.
+    /// A new session's aim allows fast spin nearly twice the flight's
+    /// reading (real balls' flights read it at 0.3–0.5), slow spin a
+    /// third more; once a bin holds enough readings, its own spread.
     #[test]
     fn a_new_bin_hedges_fast_spin_until_it_has_readings() {
         let table = BounceModel::new(0.92, 0.2, R);
