@@ -76,6 +76,11 @@ impl VirtualRun {
     pub fn hits(&self) -> usize {
         self.per_ball.iter().filter(|b| b.reachable && b.hit).count()
     }
+
+    /// Reachable balls returned.
+    pub fn returned(&self) -> usize {
+        self.per_ball.iter().filter(|b| b.reachable && b.returned).count()
+    }
 }
 
 /// Runs `cfg.balls` balls through the cell on the virtual clock until the

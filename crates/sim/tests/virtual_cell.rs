@@ -20,7 +20,7 @@ fn summary(r: &VirtualRun) -> String {
     let mut err: Vec<f64> = r.per_ball.iter().filter(|b| b.reachable).filter_map(|b| b.hit_err_mm).collect();
     err.sort_by(f64::total_cmp);
     let median = err.get(err.len() / 2).copied().unwrap_or(f64::NAN);
-    let returned = r.per_ball.iter().filter(|b| b.reachable && b.returned).count();
+    let returned = r.returned();
     format!(
         "{} of {} reachable hit, {returned} returned, median miss {median:.1} mm; RSI {} cycles, {} late, {} axis-rate \
          overs, {} clamped{}; ingest {:?}",
@@ -77,7 +77,7 @@ fn thirty_balls_are_hit_on_virtual_time() {
     // 80–97 % of launcher balls. Those met off the plane, at the window's
     // edge, are the harder ones: over seeds 1–25 the cell returns 89.2 % of
     // the reachable balls (`returns_over_seeds`), this seed 83 %.
-    let returned = r.per_ball.iter().filter(|b| b.reachable && b.returned).count();
+    let returned = r.returned();
     assert!(returned as f64 >= 0.8 * r.reachable() as f64, "{}", summary(&r));
     assert_eq!(r.mock.late, 0);
     assert_eq!((r.session.requests, r.session.answers), (r.mock.cycles, r.mock.cycles));
@@ -333,9 +333,10 @@ fn the_ceiling_cameras_spin_reaches_the_estimator_and_corrects_what_the_flight_m
     assert!(with.logo_spins_fused > 0 && with.logo_spins_fused + with.logo_spins_gated <= logo.fitted, "{logo:?}");
     assert_eq!((with.mock.late, with.mock.rates_over, with.session.safety_clamped), (0, 0, 0), "{}", summary(&with));
     home_within_limits(&with);
-    // The strokes answer a spin nearer the truth, and hit at least as
+    // The strokes answer a spin nearer the truth, and return at least as
     // many balls (over 25 seeds the returns of the reachable balls go
-    // from 70 % to 84 %, `returns_over_seeds`).
+    // from 78 % to 88 %, `returns_over_seeds`; the hits stay at 98 %
+    // either way, one ball up or down from seed to seed).
     let spin_err = |r: &VirtualRun| {
         let mut e: Vec<f64> = r.per_ball.iter().filter(|b| b.reachable).filter_map(|b| b.spin_err_pct).collect();
         e.sort_by(f64::total_cmp);
@@ -344,7 +345,7 @@ fn the_ceiling_cameras_spin_reaches_the_estimator_and_corrects_what_the_flight_m
     let (e_with, e_without) = (spin_err(&with), spin_err(&without));
     eprintln!("median spin error {e_without:.1} % without the camera, {e_with:.1} % with it");
     assert!(e_with < 0.5 * e_without, "{e_with:.1} % vs {e_without:.1} %");
-    assert!(with.hits() >= without.hits(), "{} vs {}", summary(&with), summary(&without));
+    assert!(with.returned() >= without.returned(), "{} vs {}", summary(&with), summary(&without));
 }
 
 #[test]
@@ -420,7 +421,7 @@ fn the_cell_plays_human_rally_strokes_and_serves() {
     assert!(r.balls.iter().all(|b| b.truth.bounce.is_some_and(|bn| bn.pos[0] > 0.0)));
     assert!(r.reachable() >= 10, "{}", summary(&r));
     assert!(r.hits() + 1 >= r.reachable(), "{}", summary(&r));
-    let returned = r.per_ball.iter().filter(|b| b.reachable && b.returned).count();
+    let returned = r.returned();
     assert!(returned as f64 >= 0.85 * r.reachable() as f64, "{}", summary(&r));
     assert_eq!((r.session.safety_clamped, r.mock.rates_over), (0, 0), "{}", summary(&r));
     home_within_limits(&r);
