@@ -37,7 +37,7 @@ const SCALE_GRID: usize = 25;
 /// Most a bounce's normalised squared residual counts.
 const COST_CAP: f64 = 16.0;
 /// σ of ln(scale) about a bin's scale before it holds [`MIN_FOR_SHARE`]
-/// bounces: a flight's spin may be a third off (real balls, `docs/physics.md`).
+/// readings: a flight's spin may be a third off (real balls, `docs/physics.md`).
 pub(crate) const SHARE_START: f64 = 0.3;
 /// σ of ln(spin) the aim allows a ball above its estimate
 /// ([`SpinPrior::ball_scale`]) while its bin holds fewer than
@@ -48,7 +48,8 @@ pub(crate) const SHARE_START: f64 = 0.3;
 /// net with that much more spin); the filter's spread at the contact
 /// stays the bin's, which costs timing where the reading is right.
 pub(crate) const HEDGE_START: [f64; SPIN_BINS] = [SHARE_START, SHARE_START, 0.45, 0.6];
-/// Bounces a bin needs before its own spread counts.
+/// Readings (bounces and the camera's spins) a bin needs before its own
+/// spread counts.
 const MIN_FOR_SHARE: usize = 4;
 /// Bounds of a bin's spread.
 const SHARE_BOUNDS: (f64, f64) = (0.05, 0.6);
