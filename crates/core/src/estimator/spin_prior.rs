@@ -217,7 +217,7 @@ impl SpinPrior {
     }
 
     /// How far the aim allows one ball's spin above its bin's scale, as σ
-    /// of ln: the bin's spread, or [`HEDGE_START`] while the bin is new.
+    /// of ln: the bin's spread, or `HEDGE_START` while the bin is new.
     pub fn hedge_at(&self, s: f64) -> f64 {
         self.interpolate(s, |k, b| {
             if b.seen.iter().flatten().count() < MIN_FOR_SHARE { b.share.max(HEDGE_START[k]) } else { b.share }
