@@ -15,9 +15,8 @@
 //! back, and so is one that would not clear it were the ball's spin
 //! [`NET_SPIN_SIGMAS`] σ above its estimate (σ of ln(spin): the spin
 //! prior's hedge for the ball, wider while the session is new, or the
-//! camera's): a saturated lift reads
-//! fast spin low, and more backspin than the aim knew drops the return
-//! into the net. Where no face lands the target so moved back, the
+//! camera's): a saturated lift reads fast spin low, and more backspin
+//! than the aim knew drops the return into the net. Where no face lands the target so moved back, the
 //! deepest clear landing found is the aim. θ stays within
 //! `strike.aim_tilt_deg`.
 //!

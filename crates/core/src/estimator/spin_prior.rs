@@ -156,6 +156,14 @@ struct Bin {
     share: f64,
 }
 
+impl Bin {
+    /// Whether `share` is the bin's own (it holds [`MIN_FOR_SHARE`]
+    /// readings), not the start's.
+    fn has_own_share(&self) -> bool {
+        self.seen.iter().flatten().count() >= MIN_FOR_SHARE
+    }
+}
+
 /// One ball's spin scale from the session ([`SpinPrior::ball_scale`]).
 #[derive(Copy, Clone, Debug, PartialEq)]
 pub struct BallScale {
@@ -219,9 +227,7 @@ impl SpinPrior {
     /// How far the aim allows one ball's spin above its bin's scale, as σ
     /// of ln: the bin's spread, or `HEDGE_START` while the bin is new.
     pub fn hedge_at(&self, s: f64) -> f64 {
-        self.interpolate(s, |k, b| {
-            if b.seen.iter().flatten().count() < MIN_FOR_SHARE { b.share.max(HEDGE_START[k]) } else { b.share }
-        })
+        self.interpolate(s, |k, b| if b.has_own_share() { b.share } else { b.share.max(HEDGE_START[k]) })
     }
 
     /// The scale for one ball as its flight shows it (`speed`: at the
@@ -375,7 +381,7 @@ impl SpinPrior {
             };
             n += 1;
         }
-        if n >= MIN_FOR_SHARE {
+        if bin.has_own_share() {
             bin.share = (sum / n as f64).max(0.0).sqrt().clamp(SHARE_BOUNDS.0, SHARE_BOUNDS.1);
         }
         self.count = self.count.saturating_add(1);
