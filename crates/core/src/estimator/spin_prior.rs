@@ -69,8 +69,11 @@ pub(crate) fn spin_parameter(state: &BallState, radius: f64) -> f64 {
 const SPEED_MEMORY: usize = 48;
 /// Width of the kernel in ln(speed) over which balls count as alike.
 const SPEED_KERNEL: f64 = 0.08;
-/// Least summed kernel weight of alike balls for their spin to count.
-const SPEED_MIN_WEIGHT: f64 = 3.0;
+/// Least summed kernel weight of alike balls for their spin to count: one
+/// ball of the same speed. A launcher's setting repeats its spin within
+/// [`SPEED_SHARE_FLOOR`], so one reading tells the next ball's; where
+/// alike balls differ (a player's), their spread says so from the second.
+const SPEED_MIN_WEIGHT: f64 = 1.0;
 /// Least σ of ln(spin) of alike balls (a launcher's spin at one setting
 /// strays by about this much).
 const SPEED_SHARE_FLOOR: f64 = 0.08;
@@ -269,9 +272,9 @@ impl SpinPrior {
             return None;
         }
         let mean = sx / sw;
-        let var = (sxx / sw - mean * mean).max(0.0);
+        let var = (sxx / sw - mean * mean).max(SPEED_SHARE_FLOOR * SPEED_SHARE_FLOOR);
         // The spread of alike balls, and the mean's own uncertainty.
-        Some((mean, (var * (1.0 + 1.0 / sw)).sqrt().max(SPEED_SHARE_FLOOR)))
+        Some((mean, (var * (1.0 + 1.0 / sw)).sqrt()))
     }
 
     fn remember_spin(&mut self, flight: &BallState, scale: f64, v: f64) {
@@ -448,6 +451,29 @@ mod tests {
         assert_eq!(prior.ball_scale(&back, R, 8.0).scale, prior.scale_at(spin_parameter(&back, R)));
         let slow = at(5.0, 250.0);
         assert_eq!(prior.ball_scale(&slow, R, 5.0).scale, prior.scale_at(spin_parameter(&slow, R)));
+    }
+
+    /// One ball the camera read at 8 m/s tells the next ball of that speed
+    /// and lift its spin, with the floor's spread and the mean's own
+    /// uncertainty (σ 0.08·√2); a ball 13 % slower is not alike.
+    #[test]
+    fn one_alike_ball_tells_the_next_ones_spin() {
+        let table = BounceModel::new(0.92, 0.2, R);
+        let at = |v: f64, w: f64| BallState::new(Vec3::zeros(), Vec3::new(v, 0.0, -2.0), Vec3::new(0.0, w, 0.0));
+        let mut prior = SpinPrior::default();
+        assert!(prior.take_logo(&at(8.0, 300.0), 2.0, 0.05, &table, 8.0));
+        let next = at(8.0, 250.0);
+        let s = spin_parameter(&next, R);
+        let (bin_k, bin_share) = (prior.scale_at(s), prior.share_at(s));
+        let BallScale { scale: k, share, .. } = prior.ball_scale(&next, R, 8.0);
+        let memory = (2.0 * SPEED_SHARE_FLOOR * SPEED_SHARE_FLOOR).recip();
+        let expected = (250.0 * bin_k).ln() * bin_share.powi(-2) + 600f64.ln() * memory;
+        let expected = (expected / (bin_share.powi(-2) + memory)).exp();
+        assert!((250.0 * k - expected).abs() < 1e-6 * expected, "{} vs {expected}", 250.0 * k);
+        assert!((share - (bin_share.powi(-2) + memory).sqrt().recip()).abs() < 1e-12, "{share}");
+        assert!((250.0 * k - 600.0).abs() < 0.15 * 600.0, "×{k}");
+        let slower = at(7.0, 250.0);
+        assert_eq!(prior.ball_scale(&slower, R, 7.0).scale, prior.scale_at(spin_parameter(&slower, R)));
     }
 
     /// A new session's aim allows fast spin nearly twice the flight's
