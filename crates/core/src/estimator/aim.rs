@@ -14,7 +14,7 @@
 //! not clear the net by [`NET_CLEARANCE`] is re-aimed [`DEEPER`] further
 //! back, and so is one that would not clear it were the ball's spin
 //! [`NET_SPIN_SIGMAS`] σ above its estimate (σ of ln(spin): the spin
-//! prior's hedge for the ball, wider while the session is new, or the
+//! prior's hedge for the ball, no less than a flight alone may hide, or the
 //! camera's): a saturated lift reads fast spin low, and more backspin
 //! than the aim knew drops the return into the net. Where no face lands the target so moved back, the
 //! deepest clear landing found is the aim. θ stays within

@@ -39,15 +39,19 @@ const COST_CAP: f64 = 16.0;
 /// σ of ln(scale) about a bin's scale before it holds [`MIN_FOR_SHARE`]
 /// readings: a flight's spin may be a third off (real balls, `docs/physics.md`).
 pub(crate) const SHARE_START: f64 = 0.3;
-/// σ of ln(spin) the aim allows a ball above its estimate
-/// ([`SpinPrior::ball_scale`]) while its bin holds fewer than
-/// [`MIN_FOR_SHARE`] readings. Real balls' flights read 20–40 rev/s at
-/// 0.95 of the truth but 40–80 at 0.53 and faster at 0.31
-/// (`docs/physics.md`): from S 0.4 up, a fresh session's flight may show
-/// half the spin or less. Only the aim takes it (a return that clears the
-/// net with that much more spin); the filter's spread at the contact
-/// stays the bin's, which costs timing where the reading is right.
-pub(crate) const HEDGE_START: [f64; SPIN_BINS] = [SHARE_START, SHARE_START, 0.45, 0.6];
+/// σ of ln(spin) the aim allows a ball above its estimate, at the least
+/// ([`SpinPrior::ball_scale`]): how far a flight alone may read a real
+/// ball's spin low. Real balls' flights read 20–40 rev/s at 0.95 of the
+/// truth but 40–80 at 0.53 and faster at 0.31 (`docs/physics.md`): from S
+/// 0.4 up a flight may show half the spin or less, and balls differ in
+/// their lift by ±25 %. A bin's readings tell its scale, not how far the
+/// next ball's flight strays from it, and a backspin ball's bounce (it
+/// slides) tells the bins nothing; only a reading of the ball's own spin
+/// narrows it (alike balls of the speed memory, the camera). Only the aim
+/// takes it (a return that clears the net with that much more spin); the
+/// filter's spread at the contact stays the bin's, which costs timing
+/// where the reading is right.
+pub(crate) const FLIGHT_HEDGE: [f64; SPIN_BINS] = [SHARE_START, SHARE_START, 0.45, 0.6];
 /// Readings (bounces and the camera's spins) a bin needs before its own
 /// spread counts.
 const MIN_FOR_SHARE: usize = 4;
@@ -228,9 +232,9 @@ impl SpinPrior {
     }
 
     /// How far the aim allows one ball's spin above its bin's scale, as σ
-    /// of ln: the bin's spread, or `HEDGE_START` while the bin is new.
+    /// of ln: the bin's spread, at least `FLIGHT_HEDGE`.
     pub fn hedge_at(&self, s: f64) -> f64 {
-        self.interpolate(s, |k, b| if b.has_own_share() { b.share } else { b.share.max(HEDGE_START[k]) })
+        self.interpolate(s, |k, b| b.share.max(FLIGHT_HEDGE[k]))
     }
 
     /// The scale for one ball as its flight shows it (`speed`: at the
@@ -476,25 +480,33 @@ mod tests {
         assert_eq!(prior.ball_scale(&slower, R, 7.0).scale, prior.scale_at(spin_parameter(&slower, R)));
     }
 
-    /// A new session's aim allows fast spin nearly twice the flight's
-    /// reading (real balls' flights read it at 0.3–0.5), slow spin a
-    /// third more; once a bin holds enough readings, its own spread.
+    /// The aim allows fast spin nearly twice the flight's reading (real
+    /// balls' flights read it at 0.3–0.5), slow spin a third more, however
+    /// many readings agree on the bin's scale; a bin whose balls stray
+    /// further, its own spread.
     #[test]
-    fn a_new_bin_hedges_fast_spin_until_it_has_readings() {
+    fn the_aim_hedges_what_a_flight_may_hide_whatever_the_bins_hold() {
         let table = BounceModel::new(0.92, 0.2, R);
         let mut prior = SpinPrior::default();
         assert_eq!([prior.hedge_at(0.05), prior.hedge_at(0.8), prior.hedge_at(2.0)], [SHARE_START, 0.6, 0.6]);
         assert!((prior.hedge_at(0.6) - 0.525).abs() < 1e-12);
         assert_eq!(prior.shares(), [SHARE_START; SPIN_BINS]);
-        let fast = BallState::new(Vec3::zeros(), Vec3::new(6.0, 0.0, -2.0), Vec3::new(0.0, 240.0, 0.0));
-        assert!((spin_parameter(&fast, R) - 0.76).abs() < 0.01);
+        let at = |w: f64| BallState::new(Vec3::zeros(), Vec3::new(6.0, 0.0, -2.0), Vec3::new(0.0, w, 0.0));
+        assert!((spin_parameter(&at(240.0), R) - 0.76).abs() < 0.01);
         for k in 0..MIN_FOR_SHARE {
-            assert!(prior.take_logo(&fast, 2.0 + 0.01 * k as f64, 0.05, &table, 6.0));
+            assert!(prior.take_logo(&at(240.0), 2.0 + 0.01 * k as f64, 0.05, &table, 6.0));
         }
         let share = prior.shares()[3];
         assert!(share < 0.1, "{share}");
-        assert!((prior.hedge_at(0.8) - share).abs() < 1e-12);
-        assert!((prior.hedge_at(0.2) - SHARE_START).abs() < 1e-12);
+        assert_eq!(prior.hedge_at(0.8), FLIGHT_HEDGE[3]);
+        // S 0.2: balls read at ×0.5 to ×4 of their flights.
+        assert!((spin_parameter(&at(60.0), R) - 0.19).abs() < 0.01);
+        for k in [0.5, 1.0, 2.0, 4.0] {
+            assert!(prior.take_logo(&at(60.0), k, 0.05, &table, 6.0 * k));
+        }
+        let wide = prior.shares()[1];
+        assert!(wide > FLIGHT_HEDGE[1], "{wide}");
+        assert_eq!(prior.hedge_at(0.2), wide);
     }
 
     /// Fast topspin that slides at the contact, shown at a third of its
