@@ -534,18 +534,18 @@ impl Estimator {
             Update::Accepted { d2 } => (true, d2),
             Update::Rejected { d2 } => (false, d2),
         };
+        let event = EstimatorEvent::LogoSpin { trajectory: track.id, t: track.last_t, accepted, d2 };
         if accepted && let Some(k) = scale {
             let along = flight.spin.normalize();
             let sigma =
                 ((along.transpose() * m.cov * along)[0].max(0.0).sqrt() / m.spin.norm()).max(LOGO_SCALE_SIGMA_FLOOR);
-            // The next observation gives the table its scale
-            // (`track_step`), against the filter's spin as it is then.
             track.logo = Some((m.spin, sigma));
             if self.cfg.learn.enabled && self.cfg.learn.spin {
                 self.session.spin.take_logo(&flight, k, sigma, &self.prop.bounce, track.speed0);
             }
         }
-        Some(EstimatorEvent::LogoSpin { trajectory: track.id, t: track.last_t, accepted, d2 })
+        self.refresh_spin_scale();
+        Some(event)
     }
 
     /// Takes one observation (capture time on our clock, position in the
@@ -653,6 +653,7 @@ impl Estimator {
             spin_hedge,
         });
         out.push(EstimatorEvent::Started { trajectory: id, t: last.t, start_outliers: outliers.len() as u8 });
+        self.refresh_spin_scale();
         self.plan(last.t, out);
     }
 
@@ -661,23 +662,6 @@ impl Estimator {
         let track = self.track.as_mut().expect("tracking");
         if sample.t <= track.ekf.t {
             return; // out of order or duplicate
-        }
-        if track.spin_before_bounce.is_none() {
-            // The spin the table will meet, for the flight shown so far:
-            // as the camera read it, else as the session learned it.
-            let state = track.ekf.state();
-            if let Some((logo, sigma)) = track.logo
-                && let Some(k) = logo_scale(&logo, &state.spin)
-            {
-                track.prop.bounce = track.prop.bounce.with_spin_scale(k);
-                track.ekf.noise.bounce_spin_share = sigma;
-                track.spin_hedge = sigma;
-            } else if cfg.learn.enabled && cfg.learn.spin {
-                let b = self.session.spin.ball_scale(&state, self.prop.bounce.radius, track.speed0);
-                track.prop.bounce = track.prop.bounce.with_spin_scale(b.scale);
-                track.ekf.noise.bounce_spin_share = b.share;
-                track.spin_hedge = b.hedge;
-            }
         }
         let mut trial = track.ekf;
         if let Some(tb) = trial.predict(&track.prop, sample.t) {
@@ -769,7 +753,34 @@ impl Estimator {
             self.end_track(out);
             return;
         }
+        self.refresh_spin_scale();
         self.plan(sample.t, out);
+    }
+
+    /// Sets the spin the table will meet for the flight shown so far (as
+    /// the camera read it, else as the session learned it), against the
+    /// filter's spin as it is now: after each observation and batch, and
+    /// after the camera's spin, so that the plan and the next bounce take
+    /// the scale of the spin they multiply (a batch can move the flight's
+    /// spin by half between two observations). Frozen at the bounce.
+    fn refresh_spin_scale(&mut self) {
+        let Some(track) = &mut self.track else { return };
+        if track.spin_before_bounce.is_some() {
+            return;
+        }
+        let state = track.ekf.state();
+        if let Some((logo, sigma)) = track.logo
+            && let Some(k) = logo_scale(&logo, &state.spin)
+        {
+            track.prop.bounce = track.prop.bounce.with_spin_scale(k);
+            track.ekf.noise.bounce_spin_share = sigma;
+            track.spin_hedge = sigma;
+        } else if self.cfg.learn.enabled && self.cfg.learn.spin {
+            let b = self.session.spin.ball_scale(&state, self.prop.bounce.radius, track.speed0);
+            track.prop.bounce = track.prop.bounce.with_spin_scale(b.scale);
+            track.ekf.noise.bounce_spin_share = b.share;
+            track.spin_hedge = b.hedge;
+        }
     }
 
     fn ended(&self, _t: f64) -> Option<EndReason> {
