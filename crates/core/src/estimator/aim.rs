@@ -71,8 +71,12 @@ pub(crate) const NET_CLEARANCE: f64 = 0.05;
 /// How far above its estimate, in σ of ln(spin) (the spin prior's hedge
 /// for the ball, or the camera's), the spin may be and a return still clear
 /// the net by [`NET_CLEARANCE`]: more backspin drops the return, and where
-/// the lift saturates the flight reads fast spin low.
-pub(crate) const NET_SPIN_SIGMAS: f64 = 1.0;
+/// the lift saturates the flight reads fast spin low. Two: with the
+/// flight's hedge (σ 0.45 at S 0.4, 0.6 at 0.8) that is ×2.5 and ×3.3,
+/// what real balls' flights hide at their worst (read at 0.53 of 40–80
+/// rev/s, 0.31 above 80: `docs/physics.md`); a ball in the net is lost
+/// outright, one aimed deeper than it needed rarely.
+pub(crate) const NET_SPIN_SIGMAS: f64 = 2.0;
 /// How much further back a return that grazes the net is aimed, m.
 pub(crate) const DEEPER: f64 = 0.25;
 /// A landing this close to the target that does not clear the net moves
