@@ -64,7 +64,9 @@ fn home_within_limits(r: &VirtualRun) {
 #[test]
 fn thirty_balls_are_hit_on_virtual_time() {
     let cal = Calibration::default_cell();
-    let cfg = DemoConfig { balls: 30, seed: 7, ..DemoConfig::default() };
+    // 0.7 s after the last flight: its stroke, opened to 43°, and the way
+    // home outlast the default 0.6 s by a few cycles.
+    let cfg = DemoConfig { balls: 30, seed: 7, tail_s: 0.7, ..DemoConfig::default() };
     let r = run_virtual(&cfg, &cal);
     eprintln!("virtual demo: {}", summary(&r));
     assert_eq!(r.balls.len(), 30);

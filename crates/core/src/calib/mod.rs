@@ -175,10 +175,10 @@ fn default_aim_bat_speed() -> [f64; 2] {
     [0.5, 2.0]
 }
 
-/// ±40°: inside the workspace's ±55° about home less the strokes' 10°
-/// margin (`robot.toml`).
+/// 40° closed, 43° open: inside the workspace's ±55° about home less the
+/// strokes' 10° margin, with 2° to spare (`strike.toml`, `robot.toml`).
 fn default_aim_tilt() -> [f64; 2] {
-    [-40.0, 40.0]
+    [-40.0, 43.0]
 }
 
 /// The spacing of the hitting volume's planes, m.

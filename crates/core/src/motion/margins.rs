@@ -28,8 +28,12 @@ pub(crate) const PATH_LIMIT_MARGIN_RAD: f64 = 2.0 * std::f64::consts::PI / 180.0
 
 /// How far inside the workspace box a stroke's path keeps the TCP at the
 /// generator's path checks, m: between two checks the TCP moves on by up
-/// to ~0.6 mm where it turns (a run-up's far end).
-pub(crate) const PATH_WALL_MARGIN_M: f64 = 0.002;
+/// to ~0.6 mm where it turns (a run-up's far end), and the setpoints the
+/// safety filter sees lead the path (the lag's feed-forward). At 2 mm an
+/// open face's run-up, which comes up from below along the face's normal,
+/// met the filter at the box's floor (under 1 mm, a braked TCP and axis
+/// steps the controller counted) in two virtual-cell sessions of 425.
+pub(crate) const PATH_WALL_MARGIN_M: f64 = 0.005;
 
 /// How far inside the workspace's orientation range a stroke's path keeps
 /// the bat at the generator's path checks, rad: the safety filter brakes
