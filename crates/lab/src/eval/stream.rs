@@ -509,7 +509,9 @@ mod tests {
     /// whose lift saturates, a plan made before a fast topspin ball's
     /// bounce predicts the table's forward kick too small (the spin read
     /// low), while sidespin balls, whose spin gives no forward kick, get
-    /// theirs right; on our own physics topspin's is right too.
+    /// theirs right; on our own physics topspin's is right too. (Since
+    /// the speed memory keeps a slid ball above its bound, real-rally's
+    /// topspin is 0.12 m/s short at the median, was 0.3–0.9.)
     #[test]
     fn the_kick_error_shows_why_topspin_plans_come_late_on_real_balls() {
         let cal = Calibration::default_cell();
@@ -527,7 +529,7 @@ mod tests {
             (at("topspin-high"), at("sidespin-high"))
         };
         let (top, side) = kicks(Some("real-rally"));
-        assert!(top < -0.3 && side.abs() < 0.1, "real-rally: topspin {top:+.2}, sidespin {side:+.2} m/s");
+        assert!(top < -0.08 && side.abs() < 0.05, "real-rally: topspin {top:+.2}, sidespin {side:+.2} m/s");
         let (top, side) = kicks(None);
         assert!(top.abs() < 0.2 && side.abs() < 0.1, "ours: topspin {top:+.2}, sidespin {side:+.2} m/s");
     }
