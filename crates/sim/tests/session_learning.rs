@@ -290,6 +290,7 @@ fn the_cameras_spin_gives_the_ball_its_size_and_teaches_the_session() {
     let (ball, t0) = (&balls[k], launches[k]);
     let truth = Vec3::from(ball.truth.spin);
     let tb = ball.truth.bounce.expect("it bounces").t;
+    let off = |w: Vec3| (w.norm() / truth.norm() - 1.0).abs();
     let last_plan = |logo: bool| {
         let mut est = Estimator::new(&cal, config(LearnConfig::default()));
         let count = est.session().spin.count;
@@ -305,7 +306,7 @@ fn the_cameras_spin_gives_the_ball_its_size_and_teaches_the_session() {
             }
             let now = est.observe(Instant::from_secs_f64(t0 + o.t), o.pos).plan;
             if let Some(p) = now.filter(|_| fused.is_some() && o.t < tb) {
-                worst = worst.max((p.spin.norm() / truth.norm() - 1.0).abs());
+                worst = worst.max(off(p.spin));
             }
             plan = now.or(plan);
         }
@@ -315,7 +316,6 @@ fn the_cameras_spin_gives_the_ball_its_size_and_teaches_the_session() {
     let (seen, fused, taught, worst) = last_plan(true);
     assert!(worst < 0.10, "a plan after the camera's spin strays {worst} from its size");
     assert!(matches!(fused, Some(EstimatorEvent::LogoSpin { accepted: true, .. })), "{fused:?}");
-    let off = |w: Vec3| (w.norm() / truth.norm() - 1.0).abs();
     assert!(off(flown) > 0.25, "the flight alone: {flown} against {truth}");
     assert!(off(seen) < 0.10, "with the camera: {seen} against {truth}");
     assert!(taught >= 1, "the session kept the reading");
