@@ -83,8 +83,14 @@ const SPEED_MIN_WEIGHT: f64 = 1.0;
 const SPEED_SHARE_FLOOR: f64 = 0.08;
 
 /// How far above its bound the speed memory keeps a ball whose bounce
-/// slid ([`SpinPrior::take`]): two [`SPEED_SHARE_FLOOR`]s, e^0.16 = ×1.17.
-const SLID_ABOVE_BOUND: f64 = 1.173_510_870_991_810_2;
+/// slid ([`SpinPrior::take`]), in [`SPEED_SHARE_FLOOR`]s of ln(spin): two,
+/// ×e^0.16 = ×1.17.
+const SLID_ABOVE_BOUND_SPREADS: f64 = 2.0;
+
+/// The factor of [`SLID_ABOVE_BOUND_SPREADS`].
+fn slid_above_bound() -> f64 {
+    (SLID_ABOVE_BOUND_SPREADS * SPEED_SHARE_FLOOR).exp()
+}
 
 /// Which way a ball's lift points: down (topspin), up (backspin) or
 /// sideways; balls are alike only with the same.
@@ -340,7 +346,7 @@ impl SpinPrior {
         // SPEED_SHARE_FLOOR, would be predicted where half of them no longer
         // slide: its kick too small, its plan late. Two of that spread above.
         let remembered =
-            if hi == SCALE_GRID - 1 { (grid(lo) * SLID_ABOVE_BOUND).max(bin) } else { own_scale(&costs, bin) };
+            if hi == SCALE_GRID - 1 { (grid(lo) * slid_above_bound()).max(bin) } else { own_scale(&costs, bin) };
         self.keep(seen, s, &table);
         self.remember_spin(before, remembered, speed);
         true
@@ -555,7 +561,7 @@ mod tests {
         assert!(prior.take(&shown(200.0), &after, &var, &table, 5.83));
         let (mean, _) = prior.spin_by_speed(&shown(200.0), 5.83).expect("one alike ball");
         let bound = 200.0 * grid(lo);
-        assert!((mean.exp() - bound * SLID_ABOVE_BOUND).abs() < 1e-9 * bound, "{} vs {bound}", mean.exp());
+        assert!((mean.exp() - bound * slid_above_bound()).abs() < 1e-9 * bound, "{} vs {bound}", mean.exp());
         let steeper = |w: f64| BallState::new(Vec3::zeros(), Vec3::new(5.0, 0.0, -3.6), Vec3::new(0.0, w, 0.0));
         let next = prior.ball_scale(&steeper(200.0), R, 5.83);
         let kick = table.with_spin_scale(next.scale).apply(&steeper(200.0)).vel.x;
