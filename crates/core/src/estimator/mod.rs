@@ -939,7 +939,14 @@ impl HittingVolume<'_> {
         if last == Some(home) && matches!(at_home, Ok(_) | Err(Withheld::TooSoon)) {
             return at_home;
         }
-        let crossings = crate::fit::predict::crossings::<MAX_HITTING_PLANES>(prop, state, t, self.planes, bounced);
+        let crossings = crate::fit::predict::crossings::<MAX_HITTING_PLANES>(
+            prop,
+            state,
+            t,
+            self.planes,
+            bounced,
+            nominal.bounce.as_ref(),
+        );
         let on = |k: usize| -> Result<HitPoint, Withheld> {
             if k == home {
                 return at_home.map(|(hit, _)| hit);

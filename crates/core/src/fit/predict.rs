@@ -103,16 +103,25 @@ pub fn predict(prop: &Propagator, state: &BallState, t: f64, hit_plane_x: f64, b
 /// most one bounce on the robot's half, none where `bounced`): `out[k]`
 /// for plane k, `None` where the ball is past it already or the flight
 /// ends first. One integration for all of them.
+///
+/// `resume`: the bounce [`predict`] found on this flight (its
+/// [`Prediction::bounce`]). Where every plane lies past it, the flight
+/// resumes there: up to it the two take the same steps, so the crossings
+/// are the same, at half the integration.
 pub(crate) fn crossings<const N: usize>(
     prop: &Propagator,
     state: &BallState,
     t: f64,
     planes: &[f64],
     bounced: bool,
+    resume: Option<&Contact>,
 ) -> heapless::Vec<Option<HitPoint>, N> {
     let prop = &Propagator { dt: prop.dt.max(PREDICT_STEP), ..*prop };
-    let (mut s, mut now) = (*state, t);
-    let (mut bounced, mut ended) = (bounced, false);
+    let (mut s, mut now, mut bounced) = match resume {
+        Some(c) if !bounced && planes.first().is_some_and(|x| c.pos.x < *x) => (c.after, c.t, true),
+        _ => (*state, t, bounced),
+    };
+    let mut ended = false;
     let mut out = heapless::Vec::new();
     for &x in planes.iter().take(N) {
         let mut crossing = None;
@@ -190,7 +199,7 @@ mod tests {
         let s = BallState::new(Vec3::new(-1.5, 0.1, 0.3), Vec3::new(5.5, -0.2, 1.4), Vec3::new(0.0, 100.0, 0.0));
         let first = predict(&prop, &s, 0.2, planes[0], false);
         assert_eq!(first.end, FlightEnd::HitPlane, "{first:?}");
-        let c = crossings::<4>(&prop, &s, 0.2, &planes, false);
+        let c = crossings::<4>(&prop, &s, 0.2, &planes, false, None);
         assert_eq!(c.len(), 4);
         for (x, got) in planes.iter().zip(&c) {
             let one = predict(&prop, &s, 0.2, *x, false).hit.expect("it reaches every plane");
@@ -200,8 +209,40 @@ mod tests {
         }
         // Past the first plane already: none there, the others as before.
         let later = BallState { pos: Vec3::new(1.47, c[0].unwrap().state.pos.y, 0.3), ..c[0].unwrap().state };
-        let c2 = crossings::<4>(&prop, &later, 0.0, &planes, false);
+        let c2 = crossings::<4>(&prop, &later, 0.0, &planes, false, None);
         assert!(c2[0].is_none() && c2[1].is_some());
+    }
+
+    #[test]
+    fn crossings_resumed_at_the_predicted_bounce_are_the_same() {
+        let cal = Calibration::default_cell();
+        let prop = cal.propagator();
+        let planes = [1.45, 1.50, 1.55, 1.60];
+        let mut rng_state = 7u64;
+        let mut next = || {
+            rng_state = rng_state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (rng_state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let mut resumed = 0;
+        for _ in 0..200 {
+            let s = BallState::new(
+                Vec3::new(-1.6 + 0.8 * next(), 0.3 * (next() - 0.5), 0.2 + 0.2 * next()),
+                Vec3::new(4.0 + 3.0 * next(), 0.6 * (next() - 0.5), 0.5 + 1.5 * next()),
+                Vec3::new(0.0, 600.0 * (next() - 0.5), 100.0 * (next() - 0.5)),
+            );
+            let p = predict(&prop, &s, 0.1, 1.60, false);
+            let whole = crossings::<4>(&prop, &s, 0.1, &planes, false, None);
+            let short = crossings::<4>(&prop, &s, 0.1, &planes, false, p.bounce.as_ref());
+            assert_eq!(whole, short, "{s:?}");
+            resumed += usize::from(p.bounce.is_some() && whole.iter().any(Option::is_some));
+        }
+        assert!(resumed > 100, "{resumed} flights resumed at a bounce and crossed a plane");
+        // A plane before the bounce: the whole flight.
+        let s = BallState::new(Vec3::new(-1.5, 0.0, 0.3), Vec3::new(5.5, 0.0, 1.4), Vec3::new(0.0, 100.0, 0.0));
+        let p = predict(&prop, &s, 0.0, 1.60, false);
+        let early = [-0.5, 1.60];
+        let c = crossings::<2>(&prop, &s, 0.0, &early, false, p.bounce.as_ref());
+        assert!(c[0].is_some() && c == crossings::<2>(&prop, &s, 0.0, &early, false, None));
     }
 
     #[test]
@@ -219,8 +260,8 @@ mod tests {
         let played = predict(&prop, &s, 0.0, x, true);
         assert_eq!((played.bounce, played.hit, played.end), (None, None, FlightEnd::SecondBounce));
         let planes = [0.9, x];
-        let c = crossings::<2>(&prop, &s, 0.0, &planes, true);
+        let c = crossings::<2>(&prop, &s, 0.0, &planes, true, None);
         assert!(c[0].is_some() && c[1].is_none(), "{c:?}");
-        assert!(crossings::<2>(&prop, &s, 0.0, &planes, false)[1].is_some());
+        assert!(crossings::<2>(&prop, &s, 0.0, &planes, false, None)[1].is_some());
     }
 }

@@ -155,12 +155,12 @@ impl Propagator {
         }
     }
 
-    /// The fraction of the step `h` from `s0` at which `g` changes sign,
-    /// with the state there.
-    fn locate(&self, kind: Kind, s0: &BallState, h: f64, stop: &StopAt) -> (f64, BallState) {
+    /// The fraction of the step `h` from `s0` (to `s1`) at which `g`
+    /// changes sign, with the state there.
+    fn locate(&self, kind: Kind, s0: &BallState, s1: &BallState, h: f64, stop: &StopAt) -> (f64, BallState) {
         let (mut lo, mut hi) = (0.0, h);
         let mut g_lo = self.g(kind, s0, stop);
-        let mut s_hi = self.rk4(s0, h);
+        let mut s_hi = *s1;
         let mut g_hi = self.g(kind, &s_hi, stop);
         let mut side = 0i8;
         for _ in 0..40 {
@@ -213,7 +213,7 @@ impl Propagator {
             // above the net) must not hide a later one in the same step.
             let mut event: Option<(f64, Event, BallState)> = None;
             let mut consider = |kind: Kind| {
-                let (tau, s) = self.locate(kind, &s0, h, stop);
+                let (tau, s) = self.locate(kind, &s0, &s1, h, stop);
                 let at = *t + tau;
                 let applies = match kind {
                     Kind::Table if self.table.on_surface(s.pos.x, s.pos.y) && s.vel.z < 0.0 => {
