@@ -229,34 +229,61 @@ pub fn bat_velocity(tilt: f64, heading: f64, speed: f64) -> Vec3 {
     face_normal(tilt, heading) * speed
 }
 
-/// Flies a return from `s` (just after the hit) until its centre comes
-/// down to one radius over the table (a lob still up after [`AIM_T_MAX`]
-/// "lands" where it is then, so the landing moves continuously with the
-/// stroke); `None` if the state stops being finite.
+/// One return of [`fly_all`].
+#[cfg(test)]
 pub(crate) fn fly(prop: &Propagator, s: &BallState) -> Option<Landing> {
+    let [landing] = fly_all(prop, [Some(*s)]);
+    landing
+}
+
+/// Flies returns from just after their hits (`None`: no return) until
+/// each ball's centre comes down to one radius over the table (a lob
+/// still up after [`AIM_T_MAX`] "lands" where it is then, so the landing
+/// moves continuously with the stroke); `None` where the state stops
+/// being finite. Several fly in lockstep: each takes the steps it would
+/// alone, and their independent arithmetic overlaps in the processor (an
+/// RK4 step waits on its own square root and division).
+fn fly_all<const N: usize>(prop: &Propagator, from: [Option<BallState>; N]) -> [Option<Landing>; N] {
     let r = prop.flight.radius();
     let net_top = prop.table.net_height;
-    let mut s = *s;
-    let mut over_net = f64::NEG_INFINITY;
+    let mut flying = from;
+    let mut out = [None; N];
+    let mut over_net = [f64::NEG_INFINITY; N];
     let mut t = 0.0;
-    while t < AIM_T_MAX {
-        let next = prop.rk4(&s, AIM_STEP);
-        if !next.is_finite() {
-            return None;
+    while t < AIM_T_MAX && flying.iter().any(Option::is_some) {
+        for k in 0..N {
+            let Some(s) = flying[k] else { continue };
+            let next = prop.rk4(&s, AIM_STEP);
+            flying[k] = None;
+            if !next.is_finite() {
+                continue;
+            }
+            if (s.pos.x > 0.0) != (next.pos.x > 0.0) {
+                let u = s.pos.x / (s.pos.x - next.pos.x);
+                over_net[k] = s.pos.z + u * (next.pos.z - s.pos.z) - r - net_top;
+            }
+            if next.pos.z <= r && next.vel.z < 0.0 {
+                let u = ((s.pos.z - r) / (s.pos.z - next.pos.z)).clamp(0.0, 1.0);
+                let p = s.pos + (next.pos - s.pos) * u;
+                out[k] = Some(Landing { x: p.x, y: p.y, over_net: over_net[k] });
+                continue;
+            }
+            flying[k] = Some(next);
         }
-        if (s.pos.x > 0.0) != (next.pos.x > 0.0) {
-            let u = s.pos.x / (s.pos.x - next.pos.x);
-            over_net = s.pos.z + u * (next.pos.z - s.pos.z) - r - net_top;
-        }
-        if next.pos.z <= r && next.vel.z < 0.0 {
-            let u = ((s.pos.z - r) / (s.pos.z - next.pos.z)).clamp(0.0, 1.0);
-            let p = s.pos + (next.pos - s.pos) * u;
-            return Some(Landing { x: p.x, y: p.y, over_net });
-        }
-        s = next;
         t += AIM_STEP;
     }
-    Some(Landing { x: s.pos.x, y: s.pos.y, over_net })
+    for (k, s) in flying.iter().enumerate() {
+        if let Some(s) = s {
+            out[k] = Some(Landing { x: s.pos.x, y: s.pos.y, over_net: over_net[k] });
+        }
+    }
+    out
+}
+
+/// The landing's Jacobian in (θ, ψ) from the landings at the face `f0`
+/// and one [`FD_STEP`] further in θ (`ft`) and in ψ (`fh`).
+fn fd_jacobian(f0: [f64; 2], ft: [f64; 2], fh: [f64; 2]) -> [[f64; 2]; 2] {
+    [[(ft[0] - f0[0]) / FD_STEP, (fh[0] - f0[0]) / FD_STEP], [(ft[1] - f0[1]) / FD_STEP, (fh[1] - f0[1]) / FD_STEP]]
 }
 
 /// Where the ball `ball` lands when the face has tilt θ and heading ψ and
@@ -269,9 +296,22 @@ pub(crate) fn landing(
     heading: f64,
     speed: f64,
 ) -> Option<Landing> {
-    let n = face_normal(tilt, heading);
-    let impact = racket.hit(ball, &n, &(n * speed))?;
-    fly(prop, &impact.after)
+    let [landing] = landings(prop, racket, ball, [(tilt, heading, speed)]);
+    landing
+}
+
+/// [`landing`] for several faces (tilt, heading, speed), flown together.
+fn landings<const N: usize>(
+    prop: &Propagator,
+    racket: &RacketModel,
+    ball: &BallState,
+    faces: [(f64, f64, f64); N],
+) -> [Option<Landing>; N] {
+    let after = faces.map(|(tilt, heading, speed)| {
+        let n = face_normal(tilt, heading);
+        racket.hit(ball, &n, &(n * speed)).map(|impact| impact.after)
+    });
+    fly_all(prop, after)
 }
 
 /// What the aim may vary: the face's tilt (rad) and the bat's speed (m/s).
@@ -477,17 +517,22 @@ pub fn aim(
     // landing).
     let mut landed: Option<([f64; 2], usize, Landing)> = None;
     while left > 0 {
+        if here.is_none() && jac.is_none() && left >= 3 {
+            // A first Jacobian: the face and its two neighbours, flown
+            // together.
+            let faces = [p, [p[0] + FD_STEP, p[1]], [p[0], p[1] + FD_STEP]];
+            let [l0, lt, lh] = landings(prop, racket, ball, faces.map(|f| (f[0], f[1], bounds.speed(level, f[0]))));
+            (left, flown) = (left - 3, flown + 3);
+            jac = Some(fd_jacobian(point(&l0), point(&lt), point(&lh)));
+            here = Some(l0);
+        }
         let now = *here.get_or_insert_with(|| fly(ball, &p, level, &mut left, &mut flown));
         let j = match jac {
             Some(j) => j,
             None if left >= 2 => {
-                let f0 = point(&now);
                 let ft = point(&fly(ball, &[p[0] + FD_STEP, p[1]], level, &mut left, &mut flown));
                 let fh = point(&fly(ball, &[p[0], p[1] + FD_STEP], level, &mut left, &mut flown));
-                let j = [
-                    [(ft[0] - f0[0]) / FD_STEP, (fh[0] - f0[0]) / FD_STEP],
-                    [(ft[1] - f0[1]) / FD_STEP, (fh[1] - f0[1]) / FD_STEP],
-                ];
+                let j = fd_jacobian(point(&now), ft, fh);
                 jac = Some(j);
                 j
             }
@@ -806,6 +851,19 @@ mod tests {
         let Event::Bounce { before, .. } = ev else { panic!("{ev:?}") };
         assert!((l.x - before.pos.x).hypot(l.y - before.pos.y) < 0.01, "{l:?} vs {:?}", before.pos);
         assert!(l.over_net > 0.0);
+    }
+
+    #[test]
+    fn returns_flown_together_land_where_each_lands_alone() {
+        let (_, _, prop, _) = cell();
+        let s = BallState::new(Vec3::new(1.6, 0.1, 0.3), Vec3::new(-6.5, -0.3, 1.5), Vec3::new(0.0, -150.0, 40.0));
+        // A slower one lands first; a lob is still up at AIM_T_MAX; one
+        // is no return at all.
+        let short = BallState { vel: Vec3::new(-3.0, 0.0, 0.5), ..s };
+        let lob = BallState { vel: Vec3::new(-2.0, 0.0, 9.0), ..s };
+        let together = fly_all(&prop, [Some(s), Some(short), Some(lob), None]);
+        assert_eq!(together, [fly(&prop, &s), fly(&prop, &short), fly(&prop, &lob), None]);
+        assert!(together[1].unwrap().x > together[0].unwrap().x, "{together:?}");
     }
 
     #[test]
