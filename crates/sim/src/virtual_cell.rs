@@ -26,6 +26,7 @@ use topspin_core::calib::Calibration;
 use topspin_core::estimator::{Estimator, EstimatorEvent};
 use topspin_core::ingest::{Ingest, IngestCounters};
 use topspin_core::logo::{LogoCounters, LogoStream};
+use topspin_core::motion::Phase;
 use topspin_core::plan::StrikePlan;
 use topspin_core::rsi::{RsiSession, SessionConfig, SessionStats};
 use topspin_core::time::{Duration, Instant};
@@ -83,8 +84,15 @@ impl VirtualRun {
     }
 }
 
+/// How long the bat rests home before a virtual run ends (as the
+/// wall-clock demo's drain waits).
+const HOME_SETTLE: Duration = Duration(200_000_000);
+/// How long past `tail_s` a virtual run waits at most for the bat to come
+/// home (as the wall-clock demo's drain).
+const DRAIN_MAX: Duration = Duration(5_000_000_000);
+
 /// Runs `cfg.balls` balls through the cell on the virtual clock until the
-/// last stroke is done and the bat is home (`cfg.tracker_faults` applied;
+/// last stroke is done and the bat has rested home (`cfg.tracker_faults` applied;
 /// the live view and recording of `cfg` are not part of it).
 ///
 /// # Panics
@@ -139,7 +147,23 @@ pub fn run_virtual(cfg: &DemoConfig, cal: &Calibration) -> VirtualRun {
     let mut logo_spins = LogoSpins::default();
     let mut last_plans: Vec<StrikePlan> = Vec::new();
     let mut next = 0;
-    while pair.now() < end {
+    let mut home_since: Option<Instant> = None;
+    loop {
+        // Past the tail, on until the bat has rested home (the wall-clock
+        // demo's drain): the last stroke is never cut short.
+        let now = pair.now();
+        if now >= end {
+            if pair.session.generator().phase() == Phase::Hold {
+                if now - *home_since.get_or_insert(now) >= HOME_SETTLE {
+                    break;
+                }
+            } else {
+                home_since = None;
+            }
+            if now >= end + DRAIN_MAX {
+                break;
+            }
+        }
         // Everything that reaches the daemon before this cycle's request
         // does: its plan is in the slot when the session takes it. Crops
         // and datagrams in the order they arrive.

@@ -64,9 +64,7 @@ fn home_within_limits(r: &VirtualRun) {
 #[test]
 fn thirty_balls_are_hit_on_virtual_time() {
     let cal = Calibration::default_cell();
-    // 0.7 s after the last flight: its stroke, opened to 43°, and the way
-    // home outlast the default 0.6 s by a few cycles.
-    let cfg = DemoConfig { balls: 30, seed: 7, tail_s: 0.7, ..DemoConfig::default() };
+    let cfg = DemoConfig { balls: 30, seed: 7, ..DemoConfig::default() };
     let r = run_virtual(&cfg, &cal);
     eprintln!("virtual demo: {}", summary(&r));
     assert_eq!(r.balls.len(), 30);
@@ -110,6 +108,21 @@ fn the_same_seed_makes_the_same_session() {
     assert_eq!(a.last_plans, b.last_plans);
     let misses = |r: &VirtualRun| r.per_ball.iter().map(|v| v.hit_err_mm).collect::<Vec<_>>();
     assert_eq!(misses(&a), misses(&b));
+}
+
+/// A run with no tail still plays its last stroke out and ends with the
+/// bat rested home: the same verdicts as a run with a long tail.
+#[test]
+fn the_last_stroke_is_never_cut_short() {
+    let cal = Calibration::default_cell();
+    let cfg = DemoConfig { balls: 4, seed: 5, tail_s: 0.0, ..DemoConfig::default() };
+    let short = run_virtual(&cfg, &cal);
+    let long = run_virtual(&DemoConfig { tail_s: 1.5, ..cfg }, &cal);
+    home_within_limits(&short);
+    assert!(short.hits() >= 1 && short.per_ball.last().is_some_and(|v| v.hit), "{}", summary(&short));
+    let verdicts = |r: &VirtualRun| r.per_ball.iter().map(|v| (v.hit, v.returned, v.hit_err_mm)).collect::<Vec<_>>();
+    assert_eq!(verdicts(&short), verdicts(&long));
+    assert!(short.mock.path.len() < long.mock.path.len());
 }
 
 #[test]
