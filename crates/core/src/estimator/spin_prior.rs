@@ -156,12 +156,18 @@ fn fitting(costs: &[f64; SCALE_GRID]) -> (usize, usize) {
     (lo, hi)
 }
 
+/// What fits reaches the grid's top (`hi` of [`fitting`]): the spin is
+/// bounded from below only (a topspin bounce that slid).
+fn bounded_below_only(hi: usize) -> bool {
+    hi == SCALE_GRID - 1
+}
+
 /// One ball's own scale from its costs: the middle of what fits it, or
 /// where only bounded from below, no less than its bound and `bin` (the
 /// scale of its bin).
 fn own_scale(costs: &[f64; SCALE_GRID], bin: f64) -> f64 {
     let (lo, hi) = fitting(costs);
-    if hi == SCALE_GRID - 1 { grid(lo).max(bin) } else { (grid(lo) * grid(hi)).sqrt() }
+    if bounded_below_only(hi) { grid(lo).max(bin) } else { (grid(lo) * grid(hi)).sqrt() }
 }
 
 #[derive(Copy, Clone, Debug, PartialEq)]
@@ -346,7 +352,7 @@ impl SpinPrior {
         // SPEED_SHARE_FLOOR, would be predicted where half of them no longer
         // slide: its kick too small, its plan late. Two of that spread above.
         let remembered =
-            if hi == SCALE_GRID - 1 { (grid(lo) * slid_above_bound()).max(bin) } else { own_scale(&costs, bin) };
+            if bounded_below_only(hi) { (grid(lo) * slid_above_bound()).max(bin) } else { own_scale(&costs, bin) };
         self.keep(seen, s, &table);
         self.remember_spin(before, remembered, speed);
         true
@@ -395,7 +401,7 @@ impl SpinPrior {
         for c in costs.iter().flatten() {
             let (lo, hi) = fitting(c);
             let own = own_scale(c, bin.scale);
-            sum += if hi == SCALE_GRID - 1 {
+            sum += if bounded_below_only(hi) {
                 // Bounded from below only: it tells nothing of how far a
                 // ball strays above the bin (the start's spread).
                 (own / bin.scale).ln().powi(2).max(SHARE_START * SHARE_START)
@@ -557,7 +563,7 @@ mod tests {
         let after = table.apply(&shown(600.0)).vel;
         let costs = Seen::Bounce { before: shown(200.0), after, var }.costs(&table);
         let (lo, hi) = fitting(&costs);
-        assert_eq!(hi, SCALE_GRID - 1, "only bounded from below");
+        assert!(bounded_below_only(hi), "only bounded from below");
         assert!(prior.take(&shown(200.0), &after, &var, &table, 5.83));
         let (mean, _) = prior.spin_by_speed(&shown(200.0), 5.83).expect("one alike ball");
         let bound = 200.0 * grid(lo);
