@@ -176,8 +176,9 @@ impl Pass {
             }
             let r = sample.pos - self.s.pos;
             let j = &self.phi.pos;
-            self.h += j.transpose() * j * w2;
-            self.g += j.transpose() * r * w2;
+            // h += w2 jᵀj, g += w2 jᵀr, in place.
+            self.h.gemm_tr(w2, j, j, 1.0);
+            self.g.gemv_tr(w2, j, &r, 1.0);
             self.cost += r.norm_squared() * w2;
         }
     }
