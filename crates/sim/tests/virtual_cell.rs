@@ -441,3 +441,19 @@ fn the_cell_plays_human_rally_strokes_and_serves() {
     assert_eq!((r.session.safety_clamped, r.mock.rates_over), (0, 0), "{}", summary(&r));
     home_within_limits(&r);
 }
+
+/// A wide ball met at y_B 0.70 with the bat at 2 m/s: its follow-through
+/// came to rest 0.3 mm inside the box's side, passed it by 0.5 mm, and the
+/// safety filter braked it there for 33 cycles, two of them axis steps
+/// the controller counted (saturating world, seed 24). Rest points keep
+/// the path's 5 mm inside now.
+#[test]
+fn a_wide_hit_comes_to_rest_inside_the_box() {
+    let cal = Calibration::default_cell();
+    let world = topspin_sim::worlds::world_named(&cal, "saturating").expect("a world").with_launcher_axes();
+    let cfg = DemoConfig { balls: 27, seed: 24, world: Some(world), ..DemoConfig::default() };
+    let r = run_virtual(&cfg, &cal);
+    assert!(r.hits() > 0, "{}", summary(&r));
+    assert_eq!((r.session.safety_clamped, r.mock.rates_over), (0, 0), "{}", summary(&r));
+    home_within_limits(&r);
+}
