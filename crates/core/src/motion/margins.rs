@@ -27,9 +27,11 @@ pub(crate) const LIMIT_MARGIN_RAD: f64 = 10.0 * std::f64::consts::PI / 180.0;
 pub(crate) const PATH_LIMIT_MARGIN_RAD: f64 = 2.0 * std::f64::consts::PI / 180.0;
 
 /// How far inside the workspace box a stroke's path keeps the TCP at the
-/// generator's path checks, and its follow-through's rest point, m: between two checks the TCP moves on by up
-/// to ~0.6 mm where it turns (a run-up's far end), and the setpoints the
-/// safety filter sees lead the path (the lag's feed-forward). At 2 mm an
+/// generator's path checks, and its follow-through's rest point, m:
+/// between two checks the TCP moves on by up to ~0.6 mm where it turns (a
+/// run-up's far end), braking passes its rest point by about as much, and
+/// the setpoints the safety filter sees lead the path (the lag's
+/// feed-forward). At 2 mm an
 /// open face's run-up, which comes up from below along the face's normal,
 /// met the filter at the box's floor (under 1 mm, a braked TCP and axis
 /// steps the controller counted) in two virtual-cell sessions of 425.
