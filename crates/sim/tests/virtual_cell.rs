@@ -49,6 +49,12 @@ fn logo_runtime(method: LogoMethodChoice) -> LogoRuntime {
     }
 }
 
+/// The world `name` of `topspin eval worlds`, its balls spun as a
+/// launcher spins them (axes across the flight).
+fn launcher_world(cal: &Calibration, name: &str) -> topspin_sim::worlds::World {
+    topspin_sim::worlds::world_named(cal, name).expect("a world of topspin eval worlds").with_launcher_axes()
+}
+
 /// The bat ended at home, within every limit.
 fn home_within_limits(r: &VirtualRun) {
     assert_eq!(r.mock.poscorr_clamped, 0, "{}", summary(r));
@@ -189,11 +195,7 @@ fn returns_over_seeds() {
         .map(|s| s.trim().parse().expect("SEEDS: comma-separated integers"))
         .collect();
     let balls = std::env::var("BALLS").map_or(27, |s| s.parse().expect("BALLS: an integer"));
-    let world = std::env::var("WORLD").ok().map(|name| {
-        topspin_sim::worlds::world_named(&cal, &name)
-            .expect("WORLD: a world of topspin eval worlds")
-            .with_launcher_axes()
-    });
+    let world = std::env::var("WORLD").ok().map(|name| launcher_world(&cal, &name));
     let strokes = std::env::var("STROKES")
         .map_or(Strokes::Launcher, |s| s.parse().expect("STROKES: a stroke source of topspin demo --strokes"));
     let logo = std::env::var("LOGO").ok().map(|m| {
@@ -333,7 +335,7 @@ fn the_ceiling_cameras_spin_reaches_the_estimator_and_corrects_what_the_flight_m
     // Air whose lift saturates: the flight reads fast spins low, and the
     // strokes answer the spin the camera saw instead.
     let cal = Calibration::default_cell();
-    let world = topspin_sim::worlds::world_named(&cal, "real-launcher").unwrap().with_launcher_axes();
+    let world = launcher_world(&cal, "real-launcher");
     let mut cfg = DemoConfig { balls: 27, seed: 1, world: Some(world), ..DemoConfig::default() };
     let without = run_virtual(&cfg, &cal);
     cfg.runtime.logo = Some(logo_runtime(LogoMethodChoice::Background));
@@ -401,7 +403,7 @@ fn the_cell_plays_balls_that_fly_the_lift_real_balls_showed() {
     // and lift, on a table unlike the calibration's; the daemon knows only
     // the calibration, and the judges fly every ball as it flew.
     let cal = Calibration::default_cell();
-    let world = topspin_sim::worlds::world_named(&cal, "real-launcher").expect("a world").with_launcher_axes();
+    let world = launcher_world(&cal, "real-launcher");
     let cfg = DemoConfig { balls: 18, seed: 5, world: Some(world), ..DemoConfig::default() };
     let r = run_virtual(&cfg, &cal);
     eprintln!("real-launcher: {}", summary(&r));
@@ -450,7 +452,7 @@ fn the_cell_plays_human_rally_strokes_and_serves() {
 #[test]
 fn a_wide_hit_comes_to_rest_inside_the_box() {
     let cal = Calibration::default_cell();
-    let world = topspin_sim::worlds::world_named(&cal, "saturating").expect("a world").with_launcher_axes();
+    let world = launcher_world(&cal, "saturating");
     let cfg = DemoConfig { balls: 27, seed: 24, world: Some(world), ..DemoConfig::default() };
     let r = run_virtual(&cfg, &cal);
     assert!(r.hits() > 0, "{}", summary(&r));

@@ -162,11 +162,10 @@ fn bounded_below_only(hi: usize) -> bool {
     hi == SCALE_GRID - 1
 }
 
-/// One ball's own scale from its costs: the middle of what fits it, or
+/// One ball's own scale from what fits it ([`fitting`]): the middle, or
 /// where only bounded from below, no less than its bound and `bin` (the
 /// scale of its bin).
-fn own_scale(costs: &[f64; SCALE_GRID], bin: f64) -> f64 {
-    let (lo, hi) = fitting(costs);
+fn own_scale((lo, hi): (usize, usize), bin: f64) -> f64 {
     if bounded_below_only(hi) { grid(lo).max(bin) } else { (grid(lo) * grid(hi)).sqrt() }
 }
 
@@ -352,7 +351,7 @@ impl SpinPrior {
         // SPEED_SHARE_FLOOR, would be predicted where half of them no longer
         // slide: its kick too small, its plan late. Two of that spread above.
         let remembered =
-            if bounded_below_only(hi) { (grid(lo) * slid_above_bound()).max(bin) } else { own_scale(&costs, bin) };
+            if bounded_below_only(hi) { (grid(lo) * slid_above_bound()).max(bin) } else { own_scale((lo, hi), bin) };
         self.keep(seen, s, &table);
         self.remember_spin(before, remembered, speed);
         true
@@ -400,7 +399,7 @@ impl SpinPrior {
         let (mut sum, mut n) = (0.0, 0usize);
         for c in costs.iter().flatten() {
             let (lo, hi) = fitting(c);
-            let own = own_scale(c, bin.scale);
+            let own = own_scale((lo, hi), bin.scale);
             sum += if bounded_below_only(hi) {
                 // Bounded from below only: it tells nothing of how far a
                 // ball strays above the bin (the start's spread).
