@@ -24,7 +24,9 @@
 //! time-optimal profile is stretched to end exactly at the hit. If the hit
 //! cannot be reached in time the profile ends as early as the limits
 //! allow and the lateness is reported ([`StrokeGenerator::late_by`]); a
-//! new ball's stroke later than [`MAX_LATE_S`] is refused. Re-planning
+//! new ball's stroke later than [`MAX_LATE_S`] is refused while another
+//! ball's stroke is under way (from rest it is taken: refinements blend
+//! onto the moving arm). Re-planning
 //! starts from the state the last setpoint was sampled from, so the joint
 //! path stays continuous in velocity and acceleration across plan changes.
 //!
@@ -42,7 +44,7 @@
 //! its turn of the face that a new stroke meets on time. Only where no part
 //! works does the old weighing apply, for a hit within [`KEEP_MAX_DT_S`]:
 //! a late new stroke against keeping the old one; any other stroke later
-//! than [`MAX_LATE_S`] is refused.
+//! than [`MAX_LATE_S`] is refused while another ball's is under way.
 //!
 //! Ruckig is only asked to calculate when the target changes (a new plan,
 //! or a phase change); other cycles sample the stored trajectory. With six
@@ -116,9 +118,10 @@ const MAX_RATE_CHECKS: usize = 256;
 const PART_STEPS: usize = 4;
 /// Share of the stroke's limits for follow-through and return.
 pub(crate) const CALM_LIMIT_FRACTION: f64 = 0.5;
-/// A stroke arriving later than this is refused, s (the bat would be
-/// ~4 cm behind a ball crossing at 4 m/s), unless it refines a hit within
-/// [`KEEP_MAX_DT_S`] and is weighed against the old stroke.
+/// A stroke arriving later than this is refused while another ball's
+/// stroke is under way, s (the bat would be ~4 cm behind a ball crossing
+/// at 4 m/s), unless it refines a hit within [`KEEP_MAX_DT_S`] and is
+/// weighed against the old stroke.
 pub(crate) const MAX_LATE_S: f64 = 0.010;
 
 /// What the generator is doing.
@@ -529,7 +532,12 @@ impl StrokeGenerator {
         }
         // Later than `MAX_LATE_S` only a refinement near the old hit in
         // time is worth it (weighed against the old stroke below).
-        if late_by > MAX_LATE_S && !near_in_time {
+        // From rest (holding, or on the way home) a late stroke is still
+        // the ball's best chance: the next refinements blend onto the
+        // moving arm, and a ball read faster than the first plans said
+        // (topspin read low at first) is often met after all. Under way,
+        // the stroke for the ball before is kept.
+        if late_by > MAX_LATE_S && !near_in_time && old_phase == Phase::Approach {
             restore(self);
             return Err(PlanRejected::TooLate);
         }

@@ -127,6 +127,23 @@ fn a_late_turn_of_the_face_is_taken_as_far_as_it_is_on_time() {
 }
 
 #[test]
+fn a_late_stroke_from_rest_is_taken_and_one_under_way_is_not_left() {
+    // A fast ball seen late: from home no stroke gets to it on time. From
+    // rest the arm starts at once (the next refinements blend onto it);
+    // under way for another ball it keeps that ball's stroke.
+    let late = StrikePlan { trajectory: 2, ..plan(2, 0.0, 0.15, -0.35, 120) };
+    let mut g = generator();
+    let target = *g.set_plan(&late).expect("taken from rest");
+    assert!(target.seq == 2 && g.late_by() > MAX_LATE_S && g.phase() == Phase::Approach, "late by {}", g.late_by());
+    run(&mut g, 1, 60, &mut Vec::new());
+    let mut busy = generator();
+    busy.set_plan(&plan(1, 0.1, 0.45, 0.45, 330)).expect("reachable");
+    run(&mut busy, 1, 25, &mut Vec::new());
+    assert_eq!(busy.set_plan(&late).map(|t| t.seq), Err(PlanRejected::TooLate));
+    assert_eq!(busy.target().map(|t| t.seq), Some(1));
+}
+
+#[test]
 fn a_spin_read_anew_moves_the_hit_but_stays_the_same_ball() {
     // The first plan read the ball as backspin: high, the face open. 100 ms
     // into the stroke the spin is read as topspin: the ball comes 14 ms
