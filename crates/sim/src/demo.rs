@@ -679,6 +679,47 @@ fn judge(
     }
 }
 
+/// Where a ball is judged ([`judged`]).
+pub(crate) struct Judged<'a> {
+    /// It crosses the hitting volume's window.
+    pub reachable: bool,
+    /// The last plan that answered it.
+    pub plan: Option<&'a StrikePlan>,
+    /// Its true crossing of that plan's plane (else of the plane it meets
+    /// the window on, the hitting plane, the first plane it crosses).
+    pub hit: HitTruth,
+}
+
+/// Where `ball` (launched `start` s after `t0`) is judged: the true crossings of
+/// the volume's planes, and the last of `last_plans` whose hit is nearest
+/// the ball's true crossing of the plan's own plane; `None` where it
+/// crosses none.
+pub(crate) fn judged<'a>(
+    cal: &Calibration,
+    ball: &SimBall,
+    t0: Instant,
+    start: f64,
+    last_plans: &'a [StrikePlan],
+) -> Option<Judged<'a>> {
+    let all = crossings(cal, ball);
+    let meet = meeting_among(cal, &all);
+    let crossings: Vec<(f64, HitTruth)> = all.iter().filter_map(|(x, h)| h.map(|h| (*x, h))).collect();
+    let reference = meet.or(ball.truth.hit).or(crossings.first().map(|c| c.1))?;
+    let on_plans_plane = |p: &StrikePlan| {
+        let dx = |c: &&(f64, HitTruth)| (c.0 - p.position.x).abs();
+        crossings.iter().min_by(|a, b| dx(a).total_cmp(&dx(b))).map(|c| c.1)
+    };
+    let matched = last_plans
+        .iter()
+        .filter_map(|p| {
+            let c = on_plans_plane(p)?;
+            let off = p.hit_time.0.abs_diff(capture_time(t0, start, c.t).0);
+            (off < PLAN_MATCH.0).then_some((p, c, off))
+        })
+        .min_by_key(|m| m.2);
+    Some(Judged { reachable: meet.is_some(), plan: matched.map(|m| m.0), hit: matched.map_or(reference, |m| m.1) })
+}
+
 /// Judges every stroke on the truth: the bat's actual TCP (`path`, the
 /// controller's log) against the ball's true position within ±[`HIT_WINDOW`]
 /// of its true crossing of the hitting plane, the last plan of each
@@ -698,29 +739,8 @@ pub(crate) fn judge_strokes(
     for (k, ball) in balls.iter().enumerate() {
         let truth = &ball.truth;
         let true_spin = Vec3::new(truth.spin[0], truth.spin[1], truth.spin[2]);
-        // The true crossings of the volume's planes; the plan's own plane
-        // is where the bat and the ball are judged.
-        let all = crossings(cal, ball);
-        let meet = meeting_among(cal, &all);
-        let reachable = meet.is_some();
-        let crossings: Vec<(f64, HitTruth)> = all.iter().filter_map(|(x, h)| h.map(|h| (*x, h))).collect();
-        let Some(reference) = meet.or(truth.hit).or(crossings.first().map(|c| c.1)) else { continue };
-        // The last plan whose hit is nearest the ball's true crossing of
-        // the plan's own plane.
-        let on_plans_plane = |p: &StrikePlan| {
-            let dx = |c: &&(f64, HitTruth)| (c.0 - p.position.x).abs();
-            crossings.iter().min_by(|a, b| dx(a).total_cmp(&dx(b))).map(|c| c.1)
-        };
-        let matched = last_plans
-            .iter()
-            .filter_map(|p| {
-                let c = on_plans_plane(p)?;
-                let off = p.hit_time.0.abs_diff(capture_time(t0, starts[k], c.t).0);
-                (off < PLAN_MATCH.0).then_some((p, c, off))
-            })
-            .min_by_key(|m| m.2);
-        let plan = matched.map(|m| m.0);
-        let hit = &matched.map_or(reference, |m| m.1);
+        let Some(Judged { reachable, plan, hit }) = judged(cal, ball, t0, starts[k], last_plans) else { continue };
+        let hit = &hit;
         let t_hit = capture_time(t0, starts[k], hit.t);
         let launch = truth.to_launch();
         let launched = capture_time(t0, starts[k], 0.0);

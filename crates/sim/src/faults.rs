@@ -138,7 +138,7 @@ pub struct InjectedCounts {
     pub clock_jumped: u64,
 }
 
-fn observation(seq: u32, capture: Instant, pos: [f32; 3]) -> Planned {
+pub(crate) fn observation(seq: u32, capture: Instant, pos: [f32; 3]) -> Planned {
     let mut buf = [0u8; OBSERVATION_LEN];
     Observation { seq, capture, pos, residual: f32::NAN, cameras: 2, valid: true }.emit(&mut buf);
     let mut bytes = [0u8; MAX_PLANNED_LEN];
@@ -146,8 +146,22 @@ fn observation(seq: u32, capture: Instant, pos: [f32; 3]) -> Planned {
     Planned { at: capture, from: Sender::Tracker, len: OBSERVATION_LEN, bytes }
 }
 
+/// Sequence numbers the tracker leaves after each ball's observations for
+/// the frames that see its return ([`crate::return_feed`]).
+pub(crate) const RETURN_SEQ_ROOM: u32 = 256;
+
+/// The first sequence number after ball `k`'s observations in
+/// [`plan_datagrams`]: its return's.
+pub(crate) fn return_seq(balls: &[SimBall], k: usize) -> u32 {
+    let before: usize = balls[..k].iter().map(|b| b.observations.len()).sum();
+    (before as u32)
+        .wrapping_add(RETURN_SEQ_ROOM.wrapping_mul(k as u32))
+        .wrapping_add(balls[k].observations.len() as u32)
+}
+
 /// The clean stream: every observation of `balls` (ball k launched
-/// `starts[k]` s after `t0`) sent at capture + `latency`, in order.
+/// `starts[k]` s after `t0`) sent at capture + `latency`, in order; each
+/// ball's sequence numbers [`RETURN_SEQ_ROOM`] after the last's.
 pub(crate) fn plan_datagrams(balls: &[SimBall], starts: &[f64], latency: f64, t0: Instant) -> Vec<Planned> {
     let latency = Duration::from_nanos((latency.max(0.0) * 1e9) as u64);
     let mut seq: u32 = 0;
@@ -160,6 +174,7 @@ pub(crate) fn plan_datagrams(balls: &[SimBall], starts: &[f64], latency: f64, t0
             out.push(p);
             seq = seq.wrapping_add(1);
         }
+        seq = seq.wrapping_add(RETURN_SEQ_ROOM);
     }
     out
 }

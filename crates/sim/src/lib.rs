@@ -45,6 +45,7 @@ pub mod mock_krc;
 pub mod pair;
 pub mod probe;
 pub mod render;
+mod return_feed;
 pub mod returns;
 pub mod strikes;
 pub mod strokes;

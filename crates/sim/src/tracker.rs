@@ -28,6 +28,10 @@ pub struct TrackerModel {
     pub latency: f64,
     /// Frames after the flight's end still reported, s.
     pub end_after: f64,
+    /// The ball is followed back after the robot's stroke (the virtual
+    /// cell's returns, [`crate::virtual_cell`]), as a real cell's cameras
+    /// see it.
+    pub follows_returns: bool,
 }
 
 impl Default for TrackerModel {
@@ -39,6 +43,7 @@ impl Default for TrackerModel {
             false_starts: 0,
             latency: 0.005,
             end_after: 0.0,
+            follows_returns: true,
         }
     }
 }

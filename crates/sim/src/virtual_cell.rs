@@ -20,6 +20,7 @@ use crate::faults::{InjectedCounts, Sender, inject, plan_datagrams};
 use crate::mock_krc::{Faults, MockKrcConfig, MockResult};
 use crate::pair::Pair;
 use crate::render::Sequence;
+use crate::return_feed::ReturnFeed;
 use crate::udp_tracker::capture_time;
 use crate::{SimBall, schedule, simulate_in};
 use topspin_core::calib::Calibration;
@@ -65,6 +66,12 @@ pub struct VirtualRun {
     pub logo_spins_gated: u64,
     /// Every stroke judged on the truth.
     pub per_ball: Vec<BallVerdict>,
+    /// Returns the tracker followed (`tracker.follows_returns`).
+    pub returns_seen: usize,
+    /// The frames it sent of them.
+    pub return_frames: usize,
+    /// Balls whose spin the estimator read from their return.
+    pub returns_read: u32,
 }
 
 impl VirtualRun {
@@ -145,6 +152,8 @@ pub fn run_virtual(cfg: &DemoConfig, cal: &Calibration) -> VirtualRun {
         )
     });
     let mut logo_spins = LogoSpins::default();
+    let mut returns = ReturnFeed::new(cfg.seed, cfg.tracker);
+    let mut path = Vec::new();
     let mut last_plans: Vec<StrikePlan> = Vec::new();
     let mut next = 0;
     let mut home_since: Option<Instant> = None;
@@ -168,8 +177,14 @@ pub fn run_virtual(cfg: &DemoConfig, cal: &Calibration) -> VirtualRun {
         // does: its plan is in the slot when the session takes it. Crops
         // and datagrams in the order they arrive.
         let request_arrives = pair.now() + pair.timing.request_latency;
+        while cfg.tracker.follows_returns && returns.due(&balls, &starts, t0).is_some_and(|t| t <= pair.now()) {
+            returns.find(cal, &balls, &starts, t0, &path, &last_plans, pair.now());
+        }
         loop {
-            let tracker_at = datagrams.get(next).map(|d| d.at).filter(|t| *t <= request_arrives);
+            // The tracker's next datagram: a ball's flight or a return's.
+            let from_return = returns.next_arrival().is_some_and(|r| datagrams.get(next).is_none_or(|d| r < d.at));
+            let tracker_at = if from_return { returns.next_arrival() } else { datagrams.get(next).map(|d| d.at) }
+                .filter(|t| *t <= request_arrives);
             let crop_at = camera.as_ref().and_then(Camera::next_arrival).filter(|t| *t <= request_arrives);
             if let (Some(c), Some(cam)) = (crop_at, camera.as_mut())
                 && tracker_at.is_none_or(|t| c < t)
@@ -179,8 +194,15 @@ pub fn run_virtual(cfg: &DemoConfig, cal: &Calibration) -> VirtualRun {
                 }
                 continue;
             }
-            let Some(d) = tracker_at.and(datagrams.get(next)) else { break };
-            next += 1;
+            if tracker_at.is_none() {
+                break;
+            }
+            let d = if from_return {
+                returns.pop().expect("a queued return")
+            } else {
+                next += 1;
+                datagrams[next - 1]
+            };
             let from = match d.from {
                 Sender::Tracker => TRACKER,
                 Sender::Foreign => FOREIGN,
@@ -198,8 +220,9 @@ pub fn run_virtual(cfg: &DemoConfig, cal: &Calibration) -> VirtualRun {
         if let Some(spin) = camera.as_mut().and_then(|c| c.stream.poll(request_arrives)) {
             logo_spins.count(estimator.observe_logo_spin(&spin));
         }
-        if pair.step().is_none() {
-            break; // RSI stopped: the controller would need a restart
+        match pair.step() {
+            Some(sample) => path.push(sample),
+            None => break, // RSI stopped: the controller would need a restart
         }
     }
     let mock = pair.result();
@@ -217,6 +240,9 @@ pub fn run_virtual(cfg: &DemoConfig, cal: &Calibration) -> VirtualRun {
         logo_spins_fused: logo_spins.fused,
         logo_spins_gated: logo_spins.gated,
         per_ball,
+        returns_seen: returns.seen,
+        return_frames: returns.frames,
+        returns_read: estimator.session().returns_read,
     }
 }
 

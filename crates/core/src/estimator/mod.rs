@@ -16,6 +16,7 @@
 
 pub(crate) mod aim;
 pub(crate) mod ekf;
+pub(crate) mod returns;
 pub(crate) mod session;
 mod smooth;
 pub(crate) mod spin_prior;
@@ -135,6 +136,9 @@ pub enum EndReason {
     LeftVolume,
     /// The gate rejected the ball's observations repeatedly.
     Lost,
+    /// The planned hit is past and the gate refused an observation: the
+    /// ball left the bat (its return is watched, [`returns`]).
+    Struck,
 }
 
 /// Something the telemetry may log.
@@ -299,6 +303,9 @@ struct Track {
     /// σ of ln(spin) the aim allows above the estimate: the camera's, or
     /// the session's for this ball ([`BallScale::hedge`]).
     spin_hedge: f64,
+    /// The latest plan's stroke after the bounce, whose return will read
+    /// the ball's spin (learning the spin on, the camera not read).
+    stroke: Option<returns::Stroke>,
 }
 
 /// A logo spin more than this far from the flight's own spin direction is
@@ -371,6 +378,8 @@ pub struct Estimator {
     plan_seq: u32,
     last_prediction: Option<Prediction>,
     session: LearnedSession,
+    /// The last stroke's return, while it is watched.
+    watch: Option<returns::Watch>,
     /// σ of ln(drag multiplier) of one flight about the session's
     /// (`physics.flight_variation.drag`): the batch's prior.
     drag_variation: f64,
@@ -415,6 +424,7 @@ impl Estimator {
             plan_seq: 0,
             last_prediction: None,
             session: LearnedSession::new(&cal.physics.bounce_model(), &cfg.noise.bounce_vel),
+            watch: None,
             drag_variation: cal.physics.variation.drag,
         }
     }
@@ -464,21 +474,60 @@ impl Estimator {
             self.session.take_bounce_residual(&residual, &explained, &cfg);
             if cfg.spin {
                 let read = track.ekf.contact_vel_var_read + Vec3::repeat(after_var);
-                self.session.spin.take(&before, &after, &read, &plain, track.speed0);
+                self.session.spin.take(&before, &after, &read, &plain, track.speed0, track.id);
             }
             // The table, from the spin it met.
             let met = crate::physics::BallState { spin: before.spin * self.session.spin.scale_at(s_shown), ..before };
             self.session.take_bounce(&met, &after, self.prop.bounce.radius, &cfg);
-            let s = &self.session;
-            out.push(EstimatorEvent::Learned {
-                trajectory: track.id,
-                drag: s.drag.value as f32,
-                restitution: s.restitution.value as f32,
-                friction: s.friction.value as f32,
-                bounce_sigma: s.bounce_noise().map(|v| v.sqrt() as f32).into(),
-                spin_scale: s.spin.scales().map(|v| v as f32),
-                spin_by_speed: s.spin.kept_by_speed() as u8,
-            });
+            out.push(self.learned(track.id));
+        }
+    }
+
+    /// What the session holds now, learned from `trajectory`.
+    fn learned(&self, trajectory: u32) -> EstimatorEvent {
+        let s = &self.session;
+        EstimatorEvent::Learned {
+            trajectory,
+            drag: s.drag.value as f32,
+            restitution: s.restitution.value as f32,
+            friction: s.friction.value as f32,
+            bounce_sigma: s.bounce_noise().map(|v| v.sqrt() as f32).into(),
+            spin_scale: s.spin.scales().map(|v| v as f32),
+            spin_by_speed: s.spin.kept_by_speed() as u8,
+        }
+    }
+
+    /// Takes one observation into the watched return (if any); true where
+    /// it was the return's. The watch ends (its spin read and learned)
+    /// once full or past its span.
+    fn watch_return(&mut self, sample: Sample, out: &mut StepOutput) -> bool {
+        let Some(watch) = &mut self.watch else { return false };
+        if watch.over(sample.t) {
+            self.end_watch(out);
+            return false;
+        }
+        if watch.push(sample) {
+            self.end_watch(out);
+        }
+        true
+    }
+
+    /// Reads the watched return's spin and learns it.
+    fn end_watch(&mut self, out: &mut StepOutput) {
+        let Some(watch) = self.watch.take() else { return };
+        let flight = self.session_propagator().flight;
+        let Some(read) = watch.read(&self.racket, &flight, self.cfg.noise.measurement) else { return };
+        let st = &watch.stroke;
+        if self.session.spin.take_read(
+            &st.before_bounce,
+            read.scale,
+            read.sigma,
+            &self.prop.bounce,
+            st.speed0,
+            st.trajectory,
+        ) {
+            self.session.returns_read = self.session.returns_read.saturating_add(1);
+            out.push(self.learned(st.trajectory));
         }
     }
 
@@ -495,6 +544,9 @@ impl Estimator {
     /// Ends a silent track; call when no observation has come for a while.
     pub fn poll(&mut self, now: Instant, out: &mut StepOutput) {
         let t = now.as_secs_f64();
+        if self.watch.as_ref().is_some_and(|w| w.over(t)) {
+            self.end_watch(out);
+        }
         if let Some(track) = &self.track
             && t - track.last_t > self.cfg.silence
         {
@@ -541,7 +593,7 @@ impl Estimator {
                 ((along.transpose() * m.cov * along)[0].max(0.0).sqrt() / m.spin.norm()).max(LOGO_SCALE_SIGMA_FLOOR);
             track.logo = Some((m.spin, sigma));
             if self.cfg.learn.enabled && self.cfg.learn.spin {
-                self.session.spin.take_logo(&flight, k, sigma, &self.prop.bounce, track.speed0);
+                self.session.spin.take_read(&flight, k, sigma, &self.prop.bounce, track.speed0, track.id);
             }
         }
         self.refresh_spin_scale();
@@ -557,7 +609,7 @@ impl Estimator {
         let sample = Sample::new(t, pos);
         if self.track.is_some() {
             self.track_step(sample, &mut out);
-        } else {
+        } else if !self.watch_return(sample, &mut out) {
             self.acquire(sample, &mut out);
         }
         out
@@ -651,6 +703,7 @@ impl Estimator {
             logo: None,
             speed0: state.vel.norm(),
             spin_hedge,
+            stroke: None,
         });
         out.push(EstimatorEvent::Started { trajectory: id, t: last.t, start_outliers: outliers.len() as u8 });
         self.refresh_spin_scale();
@@ -734,6 +787,16 @@ impl Estimator {
             }
             Update::Rejected { d2 } => {
                 out.push(EstimatorEvent::Rejected { trajectory: track.id, t: sample.t, d2 });
+                if let Some(stroke) = track.stroke.filter(|s| sample.t > s.t_hit) {
+                    // The stroke is past and the ball left its path: the
+                    // track ends, and its return is watched.
+                    let id = track.id;
+                    out.push(EstimatorEvent::Ended { trajectory: id, t: sample.t, reason: EndReason::Struck });
+                    self.end_track(out);
+                    self.watch = Some(returns::Watch::new(stroke));
+                    self.watch_return(sample, out);
+                    return;
+                }
                 if track.rejects.push(sample).is_err() || track.rejects.is_full() {
                     let id = track.id;
                     let rejected = track.rejects.clone();
@@ -864,6 +927,19 @@ impl Estimator {
                 )
             }
         };
+        if self.cfg.learn.enabled && self.cfg.learn.spin && track.logo.is_none() {
+            track.stroke = track.ekf.last_contact.map(|before_bounce| returns::Stroke {
+                trajectory: track.id,
+                t_hit: hit.t,
+                pos: hit.state.pos,
+                vel: hit.state.vel,
+                before_bounce,
+                table: track.prop.bounce,
+                normal: orientation.face_normal(),
+                bat_vel: velocity,
+                speed0: track.speed0,
+            });
+        }
         out.plan = Some(StrikePlan {
             seq: self.plan_seq,
             trajectory: track.id,

@@ -134,6 +134,8 @@ pub struct LearnedSession {
     pub spin: SpinPrior,
     /// Bounces no table explained (learned nothing from).
     pub unexplained: u32,
+    /// Balls whose spin their return read ([`super::returns`]).
+    pub returns_read: u32,
 }
 
 /// χ² (3 dof) at 99.9 %: a bounce whose velocity after it lies farther
@@ -151,6 +153,7 @@ impl LearnedSession {
             bounce_vel: [0, 1, 2].map(|k| Learned::new(bounce_vel_start[k], (0.002, 0.5), 0.1)),
             spin: SpinPrior::default(),
             unexplained: 0,
+            returns_read: 0,
         }
     }
 

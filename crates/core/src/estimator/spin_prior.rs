@@ -13,7 +13,7 @@
 //! and every larger scale explains them as well), the bin takes the
 //! middle of what fits: a kick cannot exceed the sliding one, so a scale
 //! a little high costs little, and one too low makes the ball early.
-//! A ball whose spin the ceiling camera read ([`SpinPrior::take_logo`])
+//! A ball whose spin the ceiling camera read ([`SpinPrior::take_read`])
 //! tells its scale directly, with the logo's own uncertainty: it is kept
 //! and weighed beside the bounces, fast spins included (whose contacts
 //! slide). Each ball so read is also kept with its speed and lift
@@ -112,6 +112,11 @@ struct SpinSeen {
     ln_speed: f64,
     class: i8,
     ln_spin: f64,
+    /// The ball's track: a ball is kept once, with its best reading.
+    ball: u32,
+    /// Its own spin was read (the camera, its return), not bounded or
+    /// told by its bounce.
+    read: bool,
 }
 
 fn grid(k: usize) -> f64 {
@@ -124,9 +129,9 @@ enum Seen {
     /// A bounce: the state at the contact as the flight showed it, the
     /// velocity seen just after it, and that velocity's variance.
     Bounce { before: BallState, after: Vec3, var: Vec3 },
-    /// A ball whose spin the ceiling camera read: its scale, as ln, and
-    /// that reading's σ.
-    Logo { ln_scale: f64, sigma: f64 },
+    /// A ball whose own spin was read (the ceiling camera, its return):
+    /// its scale, as ln, and that reading's σ.
+    Read { ln_scale: f64, sigma: f64 },
 }
 
 impl Seen {
@@ -138,7 +143,7 @@ impl Seen {
                 let v = table.with_spin_scale(m).apply(before).vel;
                 (0..2).map(|k| (v[k] - after[k]).powi(2) / var[k].max(1e-6)).sum()
             }
-            Seen::Logo { ln_scale, sigma } => ((m.ln() - ln_scale) / sigma).powi(2),
+            Seen::Read { ln_scale, sigma } => ((m.ln() - ln_scale) / sigma).powi(2),
         }
     }
 
@@ -296,14 +301,23 @@ impl SpinPrior {
         Some((mean, (var * (1.0 + 1.0 / sw)).sqrt()))
     }
 
-    fn remember_spin(&mut self, flight: &BallState, scale: f64, v: f64) {
+    /// Keeps `ball`'s spin with its speed `v` (`read`: its own spin was
+    /// read), in the place of what it kept of that ball before unless
+    /// that was read and this is not.
+    fn remember_spin(&mut self, flight: &BallState, scale: f64, v: f64, ball: u32, read: bool) {
         let w = flight.spin.norm() * scale;
         if !(w > 0.0 && w.is_finite() && v > 0.0 && v.is_finite()) {
             return;
         }
-        self.by_speed[self.by_speed_next] =
-            Some(SpinSeen { ln_speed: v.ln(), class: lift_class(flight), ln_spin: w.ln() });
-        self.by_speed_next = (self.by_speed_next + 1) % SPEED_MEMORY;
+        let seen = SpinSeen { ln_speed: v.ln(), class: lift_class(flight), ln_spin: w.ln(), ball, read };
+        match self.by_speed.iter().position(|s| s.is_some_and(|s| s.ball == ball)) {
+            Some(k) if self.by_speed[k].is_some_and(|s| s.read && !read) => {}
+            Some(k) => self.by_speed[k] = Some(seen),
+            None => {
+                self.by_speed[self.by_speed_next] = Some(seen);
+                self.by_speed_next = (self.by_speed_next + 1) % SPEED_MEMORY;
+            }
+        }
     }
 
     fn interpolate(&self, s: f64, of: impl Fn(usize, &Bin) -> f64) -> f64 {
@@ -331,7 +345,15 @@ impl SpinPrior {
     /// what fits one kick is what the reading and the tracker leave open.
     /// `speed`: the ball's at the first sample of its track
     /// ([`Self::ball_scale`]).
-    pub fn take(&mut self, before: &BallState, after: &Vec3, var: &Vec3, table: &BounceModel, speed: f64) -> bool {
+    pub fn take(
+        &mut self,
+        before: &BallState,
+        after: &Vec3,
+        var: &Vec3,
+        table: &BounceModel,
+        speed: f64,
+        ball: u32,
+    ) -> bool {
         let seen = Seen::Bounce { before: *before, after: *after, var: *var };
         let table = table.with_spin_scale(1.0);
         if table.radius * before.spin.x.hypot(before.spin.y) < MIN_SURFACE_SPEED {
@@ -353,24 +375,34 @@ impl SpinPrior {
         let remembered =
             if bounded_below_only(hi) { (grid(lo) * slid_above_bound()).max(bin) } else { own_scale((lo, hi), bin) };
         self.keep(seen, s, &table);
-        self.remember_spin(before, remembered, speed);
+        self.remember_spin(before, remembered, speed, ball, false);
         true
     }
 
-    /// Takes one ball whose spin the ceiling camera read: `flight` its
-    /// state as the flight showed it, `scale` the logo's spin per unit of
-    /// the flight's (its σ in ln: `sigma`), `table` the session's table.
-    /// Kept in the bin of the flight's spin parameter, as a bounce is, and
-    /// with `speed` as [`Self::take`] keeps it; false (nothing kept) for a
-    /// scale off the grid or not finite.
-    pub fn take_logo(&mut self, flight: &BallState, scale: f64, sigma: f64, table: &BounceModel, speed: f64) -> bool {
+    /// Takes one ball whose own spin was read, by the ceiling camera or from
+    /// its return ([`super::returns`]): `flight` its state as the flight
+    /// showed it, `scale` the spin read per unit of the flight's (its σ in
+    /// ln: `sigma`), `table` the session's table. Kept in the bin of the
+    /// flight's spin parameter, as a bounce is, and with `speed` as
+    /// [`Self::take`] keeps it, in the place of what the ball's bounce
+    /// told; false (nothing kept) for a scale off the grid or not finite.
+    #[allow(clippy::too_many_arguments)]
+    pub fn take_read(
+        &mut self,
+        flight: &BallState,
+        scale: f64,
+        sigma: f64,
+        table: &BounceModel,
+        speed: f64,
+        ball: u32,
+    ) -> bool {
         let usable = scale.is_finite() && sigma.is_finite() && sigma > 0.0;
         if !(usable && (grid(0)..=grid(SCALE_GRID - 1)).contains(&scale)) {
             return false;
         }
         let table = table.with_spin_scale(1.0);
-        self.keep(Seen::Logo { ln_scale: scale.ln(), sigma }, spin_parameter(flight, table.radius), &table);
-        self.remember_spin(flight, scale, speed);
+        self.keep(Seen::Read { ln_scale: scale.ln(), sigma }, spin_parameter(flight, table.radius), &table);
+        self.remember_spin(flight, scale, speed, ball, true);
         true
     }
 
@@ -437,7 +469,7 @@ mod tests {
         let mut prior = SpinPrior::default();
         for k in 0..20 {
             let truth = 200.0 + k as f64;
-            assert!(prior.take(&shown(0.5 * truth), &table.apply(&shown(truth)).vel, &var, &table, 5.83));
+            assert!(prior.take(&shown(0.5 * truth), &table.apply(&shown(truth)).vel, &var, &table, 5.83, k));
         }
         // S shown: 0.02·105/5.83 = 0.36, the bin at 0.4.
         let s = prior.scales();
@@ -446,7 +478,7 @@ mod tests {
         let shares = prior.shares();
         assert!(shares[2] < 0.1 && [shares[0], shares[1], shares[3]] == [SHARE_START; 3], "{shares:?}");
         assert_eq!((s[0], s[1], s[3]), (1.0, 1.0, 1.0));
-        assert!(!prior.take(&shown(-150.0), &table.apply(&shown(-300.0)).vel, &var, &table, 5.83));
+        assert!(!prior.take(&shown(-150.0), &table.apply(&shown(-300.0)).vel, &var, &table, 5.83, 102));
         assert_eq!(prior.count, 20);
         assert!((prior.scale_at(0.3) - (1.0 + 0.5 * (s[2] - 1.0))).abs() < 1e-9);
         assert_eq!(prior.scale_at(5.0), 1.0);
@@ -464,7 +496,7 @@ mod tests {
         let before = prior.ball_scale(&at(8.0, 250.0), R, 8.0);
         for k in 0..6 {
             let v = 8.0 + 0.05 * k as f64;
-            assert!(prior.take_logo(&at(v, 300.0), 2.0, 0.05, &table, v));
+            assert!(prior.take_read(&at(v, 300.0), 2.0, 0.05, &table, v, k));
         }
         assert_eq!(prior.kept_by_speed(), 6);
         let BallScale { scale: k, share, hedge } = prior.ball_scale(&at(8.0, 250.0), R, 8.0);
@@ -487,7 +519,7 @@ mod tests {
         let table = BounceModel::new(0.92, 0.2, R);
         let at = |v: f64, w: f64| BallState::new(Vec3::zeros(), Vec3::new(v, 0.0, -2.0), Vec3::new(0.0, w, 0.0));
         let mut prior = SpinPrior::default();
-        assert!(prior.take_logo(&at(8.0, 300.0), 2.0, 0.05, &table, 8.0));
+        assert!(prior.take_read(&at(8.0, 300.0), 2.0, 0.05, &table, 8.0, 104));
         let next = at(8.0, 250.0);
         let s = spin_parameter(&next, R);
         let (bin_k, bin_share) = (prior.scale_at(s), prior.share_at(s));
@@ -516,7 +548,7 @@ mod tests {
         let at = |w: f64| BallState::new(Vec3::zeros(), Vec3::new(6.0, 0.0, -2.0), Vec3::new(0.0, w, 0.0));
         assert!((spin_parameter(&at(240.0), R) - 0.76).abs() < 0.01);
         for k in 0..MIN_FOR_SHARE {
-            assert!(prior.take_logo(&at(240.0), 2.0 + 0.01 * k as f64, 0.05, &table, 6.0));
+            assert!(prior.take_read(&at(240.0), 2.0 + 0.01 * k as f64, 0.05, &table, 6.0, k as u32));
         }
         let share = prior.shares()[3];
         assert!(share < 0.1, "{share}");
@@ -524,7 +556,7 @@ mod tests {
         // S 0.2: balls read at ×0.5 to ×4 of their flights.
         assert!((spin_parameter(&at(60.0), R) - 0.19).abs() < 0.01);
         for k in [0.5, 1.0, 2.0, 4.0] {
-            assert!(prior.take_logo(&at(60.0), k, 0.05, &table, 6.0 * k));
+            assert!(prior.take_read(&at(60.0), k, 0.05, &table, 6.0 * k, (8.0 * k) as u32));
         }
         let wide = prior.shares()[1];
         assert!(wide > FLIGHT_HEDGE[1], "{wide}");
@@ -540,8 +572,8 @@ mod tests {
         let var = Vec3::repeat(0.03f64.powi(2));
         let mut prior = SpinPrior::default();
         let after = table.apply(&shown(600.0)).vel;
-        for _ in 0..8 {
-            prior.take(&shown(200.0), &after, &var, &table, 5.83);
+        for k in 0..8 {
+            prior.take(&shown(200.0), &after, &var, &table, 5.83, k);
         }
         // S shown 0.69: kept in the bin at 0.8.
         let m = prior.scales()[3];
@@ -563,7 +595,7 @@ mod tests {
         let costs = Seen::Bounce { before: shown(200.0), after, var }.costs(&table);
         let (lo, hi) = fitting(&costs);
         assert!(bounded_below_only(hi), "only bounded from below");
-        assert!(prior.take(&shown(200.0), &after, &var, &table, 5.83));
+        assert!(prior.take(&shown(200.0), &after, &var, &table, 5.83, 108));
         let (mean, _) = prior.spin_by_speed(&shown(200.0), 5.83).expect("one alike ball");
         let bound = 200.0 * grid(lo);
         assert!((mean.exp() - bound * slid_above_bound()).abs() < 1e-9 * bound, "{} vs {bound}", mean.exp());
@@ -582,11 +614,11 @@ mod tests {
         let mut prior = SpinPrior::default();
         for k in 0..12 {
             let truth = 200.0 + k as f64;
-            prior.take(&shown(0.5 * truth), &table.apply(&shown(truth)).vel, &var, &table, 5.83);
+            prior.take(&shown(0.5 * truth), &table.apply(&shown(truth)).vel, &var, &table, 5.83, k);
         }
         let good = prior.scales()[2];
         let wild = table.apply(&shown(200.0)).vel + Vec3::new(-1.5, 0.8, 0.0);
-        prior.take(&shown(100.0), &wild, &var, &table, 5.83);
+        prior.take(&shown(100.0), &wild, &var, &table, 5.83, 110);
         assert!((prior.scales()[2] - good).abs() < 0.1 * good, "{good} → {:?}", prior.scales());
     }
 
@@ -599,7 +631,7 @@ mod tests {
         let table = BounceModel::new(0.92, 0.2, R);
         let mut prior = SpinPrior::default();
         for k in 0..8 {
-            assert!(prior.take_logo(&shown(250.0 + k as f64), 2.0, 0.05, &table, 5.83));
+            assert!(prior.take_read(&shown(250.0 + k as f64), 2.0, 0.05, &table, 5.83, k));
         }
         // S shown: 0.02·250/5.83 = 0.86, the bin at 0.8.
         let s = prior.scales();
@@ -608,7 +640,7 @@ mod tests {
         assert!(prior.shares()[3] <= 0.1, "{:?}", prior.shares());
         assert_eq!(prior.count, 8);
         for (scale, sigma) in [(8.0, 0.05), (0.2, 0.05), (f64::NAN, 0.05), (2.0, 0.0), (2.0, f64::INFINITY)] {
-            assert!(!prior.take_logo(&shown(250.0), scale, sigma, &table, 5.83), "{scale} {sigma}");
+            assert!(!prior.take_read(&shown(250.0), scale, sigma, &table, 5.83, 112), "{scale} {sigma}");
         }
         assert_eq!(prior.count, 8);
     }
