@@ -218,6 +218,15 @@ pub struct EstimatorSection {
     /// every start of the daemon.
     #[serde(default = "default_learn_spin")]
     pub learn_spin: bool,
+    /// With `learn_spin`: read each ball's spin from its return as the
+    /// tracker follows it back, against the stroke the arm was sent
+    /// (false where the arm does not play the plans).
+    #[serde(default = "default_learn_from_returns")]
+    pub learn_from_returns: bool,
+}
+
+fn default_learn_from_returns() -> bool {
+    true
 }
 
 fn default_learn_spin() -> bool {
@@ -227,7 +236,12 @@ fn default_learn_spin() -> bool {
 impl Default for EstimatorSection {
     fn default() -> Self {
         let l = LearnConfig::default();
-        EstimatorSection { learn_session: l.enabled, ball_drag_weight: l.ball_drag_weight, learn_spin: l.spin }
+        EstimatorSection {
+            learn_session: l.enabled,
+            ball_drag_weight: l.ball_drag_weight,
+            learn_spin: l.spin,
+            learn_from_returns: default_learn_from_returns(),
+        }
     }
 }
 
@@ -588,6 +602,7 @@ impl DaemonConfig {
             LearnConfig {
                 ball_drag_weight: self.estimator.ball_drag_weight,
                 spin: self.estimator.learn_spin,
+                returns: self.estimator.learn_from_returns,
                 ..LearnConfig::default()
             }
         } else {

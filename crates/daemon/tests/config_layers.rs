@@ -155,8 +155,12 @@ fn the_session_learning_is_set_by_configuration() {
     use topspin_core::estimator::LearnConfig;
     // On by default, with the ball's own drag weighed at the compiled weight.
     let on = DaemonConfig::default().estimator_config();
-    assert_eq!(on.learn, LearnConfig::default());
+    assert_eq!(on.learn, LearnConfig { returns: true, ..LearnConfig::default() });
     assert!(on.learn.enabled);
+    // The daemon plays its plans: it reads the spin from the returns,
+    // unless told its arm does not.
+    let no_returns = DaemonConfig::from_toml("[estimator]\nlearn_from_returns = false\n").unwrap();
+    assert!(!no_returns.estimator_config().learn.returns);
     // Off: every ball flies with the calibration.
     let off = DaemonConfig::from_toml("[estimator]\nlearn_session = false\n").unwrap();
     assert_eq!(off.estimator_config().learn, LearnConfig::OFF);

@@ -927,7 +927,7 @@ impl Estimator {
                 )
             }
         };
-        if self.cfg.learn.enabled && self.cfg.learn.spin && track.logo.is_none() {
+        if self.cfg.learn.enabled && self.cfg.learn.spin && self.cfg.learn.returns && track.logo.is_none() {
             track.stroke = track.ekf.last_contact.map(|before_bounce| returns::Stroke {
                 trajectory: track.id,
                 t_hit: hit.t,

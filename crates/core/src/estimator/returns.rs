@@ -266,4 +266,58 @@ mod tests {
             samples.iter().map(|s| Sample::new(s.t, stroke.pos + stroke.vel * (s.t - stroke.t_hit))).collect();
         assert!(read(&cal, stroke, &on).is_none(), "the ball flew on");
     }
+
+    /// Flies `ball` to time `to` (bounces included).
+    fn fly(prop: &crate::physics::Propagator, ball: &mut BallState, t: &mut f64, to: f64) {
+        while matches!(prop.advance(ball, t, &StopAt::time(to)), Event::Bounce { .. }) {}
+    }
+
+    #[test]
+    fn the_estimator_reads_a_returned_balls_spin_and_keeps_it_once() {
+        use crate::estimator::{EndReason, Estimator, EstimatorConfig, EstimatorEvent};
+        use crate::time::Instant;
+        let cal = Calibration::default_cell();
+        let (prop, racket) = (cal.propagator(), cal.racket_model());
+        let true_spin = 250.0;
+        for returns in [true, false] {
+            let mut cfg = EstimatorConfig::default();
+            cfg.learn.returns = returns;
+            let mut est = Estimator::new(&cal, cfg);
+            // A topspin ball seen at 150 Hz until its planned hit.
+            let mut ball =
+                BallState::new(Vec3::new(-1.6, 0.0, 0.35), Vec3::new(5.5, 0.0, 1.2), Vec3::new(0.0, true_spin, 0.0));
+            let (mut t, mut plan) = (0.0, None);
+            let mut events = Vec::new();
+            while plan.is_none_or(|p: crate::plan::StrikePlan| t < p.hit_time.as_secs_f64()) && t < 2.0 {
+                let out = est.observe(Instant::from_secs_f64(t), ball.pos);
+                plan = out.plan.or(plan);
+                events.extend_from_slice(&out.events);
+                let next = t + 1.0 / 150.0;
+                fly(&prop, &mut ball, &mut t, next);
+            }
+            let plan = plan.expect("a plan");
+            // The bat meets it as planned; the tracker follows the return.
+            let hit = plan.hit_time.as_secs_f64();
+            let (mut back, mut t_back) = (ball, t);
+            fly(&prop, &mut back, &mut t_back, hit);
+            back = racket.hit(&back, &plan.orientation.face_normal(), &plan.velocity).unwrap().after;
+            for k in 2..32 {
+                fly(&prop, &mut back, &mut t_back, hit + k as f64 / 150.0);
+                events.extend_from_slice(&est.observe(Instant::from_secs_f64(t_back), back.pos).events);
+            }
+            let struck =
+                events.iter().filter(|e| matches!(e, EstimatorEvent::Ended { reason: EndReason::Struck, .. })).count();
+            let kept = est.session().spin.remembered();
+            if returns {
+                assert_eq!((struck, est.session().returns_read), (1, 1), "{events:?}");
+                // Kept once, read, at the spin it flew with (the flight's
+                // spin off its axis by a few degrees counts in its size).
+                let [(_, spin, read)] = kept[..] else { panic!("{kept:?}") };
+                assert!(read && (spin / true_spin - 1.0).abs() < 0.08, "{kept:?}");
+            } else {
+                assert_eq!((struck, est.session().returns_read), (0, 0));
+                assert!(kept.iter().all(|k| !k.2), "{kept:?}");
+            }
+        }
+    }
 }

@@ -48,6 +48,11 @@ pub struct LearnConfig {
     /// Learn the spin the table meets per unit of the spin a flight shows
     /// ([`LearnedSession::spin`]), and bounce the next balls with it.
     pub spin: bool,
+    /// With `spin`: read each ball's spin from its return, against the
+    /// planned stroke ([`super::returns`]). Only where a robot plays the
+    /// plans (the daemon, the virtual cell): off for offline streams, whose
+    /// returns another racket made.
+    pub returns: bool,
 }
 
 impl Default for LearnConfig {
@@ -59,6 +64,7 @@ impl Default for LearnConfig {
             ball_drag_weight: 0.5,
             ball_drag_every: 8,
             spin: true,
+            returns: false,
         }
     }
 }
@@ -72,6 +78,7 @@ impl LearnConfig {
         ball_drag_weight: 0.0,
         ball_drag_every: 8,
         spin: false,
+        returns: false,
     };
 
     /// The drag multiplier one ball flies with: the session's, moved

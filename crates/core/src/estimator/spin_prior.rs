@@ -234,6 +234,13 @@ impl SpinPrior {
         self.by_speed.iter().flatten().count()
     }
 
+    /// What the speed memory keeps: each ball's track, spin (rad/s) and
+    /// whether it was read (not told by its bounce).
+    #[cfg(test)]
+    pub(crate) fn remembered(&self) -> Vec<(u32, f64, bool)> {
+        self.by_speed.iter().flatten().map(|s| (s.ball, s.ln_spin.exp(), s.read)).collect()
+    }
+
     /// Each bin's spread: σ of ln(scale) of one ball about the bin's.
     pub fn shares(&self) -> [f64; SPIN_BINS] {
         self.bins.map(|b| b.share)

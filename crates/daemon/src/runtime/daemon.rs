@@ -177,7 +177,7 @@ impl RuntimeConfig {
             rsi_wait: WaitStrategy::Blocking,
             estimator_busy_poll: false,
             tracker_noise: 0.002,
-            learn: topspin_core::estimator::LearnConfig::default(),
+            learn: topspin_core::estimator::LearnConfig { returns: true, ..Default::default() },
             tracker_fixed_latency: Duration::from_millis(2),
             sentype: "ImFree".to_owned(),
             log_interval_s: 10.0,
