@@ -14,20 +14,60 @@ use std::hint::black_box;
 use topspin_daemon::clock;
 
 use criterion::{Criterion, criterion_group, criterion_main};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rand_distr::StandardNormal;
 use topspin_core::calib::Calibration;
+use topspin_core::estimator::LearnConfig;
 use topspin_core::estimator::{Estimator, EstimatorConfig, EstimatorEvent};
-use topspin_core::physics::Vec3;
+use topspin_core::physics::{Event, StopAt, Vec3};
+use topspin_core::plan::StrikePlan;
 use topspin_core::time::Instant;
 use topspin_lab::eval::stream::{StreamSetup, simulate_stream};
+use topspin_sim::SimBall;
+use topspin_sim::truth::Flight;
 
-fn observations() -> Vec<(Instant, Vec3)> {
-    let cal = Calibration::default_cell();
-    let (balls, launches) = simulate_stream(&cal, &StreamSetup { balls: 45, ..StreamSetup::default() });
+fn balls() -> (Vec<SimBall>, Vec<f64>) {
+    simulate_stream(&Calibration::default_cell(), &StreamSetup { balls: 45, ..StreamSetup::default() })
+}
+
+fn observations((balls, launches): &(Vec<SimBall>, Vec<f64>)) -> Vec<(Instant, Vec3)> {
     balls
         .iter()
-        .zip(&launches)
+        .zip(launches)
         .flat_map(|(b, &t0)| b.observations.iter().map(move |o| (Instant::from_secs_f64(t0 + o.t), o.pos)))
         .collect()
+}
+
+/// The same stream with every ball returned as a first run's plans sent
+/// it: its frames after the last plan's hit replaced by the return's (the
+/// racket model at the plan's face and bat velocity, the ball's own
+/// physics), 0.2 s of them at 150 Hz with 2 mm of noise. The estimator
+/// reads each ball's spin from them (`learn.returns`).
+fn with_returns(cal: &Calibration, (balls, launches): &(Vec<SimBall>, Vec<f64>)) -> Vec<(Instant, Vec3)> {
+    let mut est = Estimator::new(cal, EstimatorConfig::default());
+    let mut rng = ChaCha8Rng::seed_from_u64(5);
+    let racket = cal.racket_model();
+    let mut out = Vec::new();
+    for (b, &t0) in balls.iter().zip(launches) {
+        let mut plan = None;
+        for o in &b.observations {
+            plan = est.observe(Instant::from_secs_f64(t0 + o.t), o.pos).plan.or(plan);
+        }
+        let hit = plan.map_or(f64::INFINITY, |p: StrikePlan| p.hit_time.as_secs_f64() - t0);
+        out.extend(b.observations.iter().filter(|o| o.t < hit).map(|o| (Instant::from_secs_f64(t0 + o.t), o.pos)));
+        let Some(p) = plan else { continue };
+        let ball = Flight::new(&b.truth.to_launch(), &b.physics).at(hit);
+        let Some(impact) = racket.hit(&ball, &p.orientation.face_normal(), &p.velocity) else { continue };
+        let (mut s, mut t) = (impact.after, hit);
+        for k in 2..32 {
+            let at = hit + k as f64 / 150.0;
+            while let Event::Bounce { .. } = b.physics.advance(&mut s, &mut t, &StopAt::time(at)) {}
+            let noise = Vec3::from_fn(|_, _| rng.sample::<f64, _>(StandardNormal)) * 0.002;
+            out.push((Instant::from_secs_f64(t0 + t), s.pos + noise));
+        }
+    }
+    out
 }
 
 /// The kind of step an observation was, for the split of the tail.
@@ -38,6 +78,9 @@ enum Step {
     Start,
     /// A tracked observation that produced a plan (EKF, refit, prediction).
     Plan,
+    /// The last frame of a return's watch: the spin read from it and kept
+    /// (once per ball returned, `learn.returns`).
+    Read,
     /// Anything else (candidate collected, withheld, after the hit).
     Other,
 }
@@ -58,6 +101,10 @@ fn percentiles(obs: &[(Instant, Vec3)], cal: &Calibration, cfg: EstimatorConfig,
                 Step::Start
             } else if out.plan.is_some() {
                 Step::Plan
+            } else if out.events.iter().any(|e| matches!(e, EstimatorEvent::Learned { .. }))
+                && !out.events.iter().any(|e| matches!(e, EstimatorEvent::Ended { .. }))
+            {
+                Step::Read
             } else {
                 Step::Other
             };
@@ -91,14 +138,20 @@ fn percentiles(obs: &[(Instant, Vec3)], cal: &Calibration, cfg: EstimatorConfig,
     );
     report("  starting a track", &|s| s == Step::Start);
     report("  tracked, with a plan", &|s| s == Step::Plan);
+    report("  reading a return", &|s| s == Step::Read);
     report("  other", &|s| s == Step::Other);
 }
 
 fn benches(c: &mut Criterion) {
-    let obs = observations();
+    let stream = balls();
+    let obs = observations(&stream);
     let cal = Calibration::default_cell();
     let cfg = EstimatorConfig::default();
     percentiles(&obs, &cal, cfg, "[aim landing]");
+    // The daemon's: each ball's spin read from its return, as the tracker
+    // follows it back (the reading once per ball, when the watch ends).
+    let learn = LearnConfig { returns: true, ..LearnConfig::default() };
+    percentiles(&with_returns(&cal, &stream), &cal, EstimatorConfig { learn, ..cfg }, "[aim landing, returns read]");
     let mut paper = cal.clone();
     paper.strike.aim = topspin_core::calib::AimMode::Paper;
     percentiles(&obs, &paper, cfg, "[aim paper]");
