@@ -12,7 +12,10 @@
 //! the robot, is returned, stops, or leaves the volume, or when the gate
 //! rejects `MAX_CONSECUTIVE_REJECTS` observations in a row (another ball,
 //! or a real change of course): those observations then open a new
-//! candidate.
+//! candidate. Past the planned hit, the first observation the gate
+//! refuses ends it at once (`EndReason::Struck`): the ball left the bat,
+//! and its return's first frames are watched for the spin it brought
+//! (`returns`, with `learn.returns`).
 
 pub(crate) mod aim;
 pub(crate) mod ekf;
@@ -137,7 +140,7 @@ pub enum EndReason {
     /// The gate rejected the ball's observations repeatedly.
     Lost,
     /// The planned hit is past and the gate refused an observation: the
-    /// ball left the bat (its return is watched, [`returns`]).
+    /// ball left the bat (its return is watched: `estimator::returns`).
     Struck,
 }
 

@@ -8,7 +8,7 @@
 //! frames after the hit; the velocity it shows, against the planned bat
 //! (face and velocity) and the racket contact model, reads the spin the
 //! ball brought to the bat, and so the scale of the spin its flight showed
-//! before the bounce ([`read`]). The session keeps it as it keeps the
+//! before the bounce ([`Watch::read`]). The session keeps it as it keeps the
 //! ceiling camera's reading ([`super::spin_prior::SpinPrior::take_read`]):
 //! the next alike balls (speed, lift direction) are aimed with it. What
 //! the plan does not know of the bat (the arm's tracking of the face and

@@ -49,7 +49,7 @@ pub struct LearnConfig {
     /// ([`LearnedSession::spin`]), and bounce the next balls with it.
     pub spin: bool,
     /// With `spin`: read each ball's spin from its return, against the
-    /// planned stroke ([`super::returns`]). Only where a robot plays the
+    /// planned stroke (`estimator::returns`). Only where a robot plays the
     /// plans (the daemon, the virtual cell): off for offline streams, whose
     /// returns another racket made.
     pub returns: bool,
@@ -141,7 +141,7 @@ pub struct LearnedSession {
     pub spin: SpinPrior,
     /// Bounces no table explained (learned nothing from).
     pub unexplained: u32,
-    /// Balls whose spin their return read ([`super::returns`]).
+    /// Balls whose spin their return read (`estimator::returns`).
     pub returns_read: u32,
 }
 

@@ -13,13 +13,14 @@
 //! and every larger scale explains them as well), the bin takes the
 //! middle of what fits: a kick cannot exceed the sliding one, so a scale
 //! a little high costs little, and one too low makes the ball early.
-//! A ball whose spin the ceiling camera read ([`SpinPrior::take_read`])
-//! tells its scale directly, with the logo's own uncertainty: it is kept
-//! and weighed beside the bounces, fast spins included (whose contacts
-//! slide). Each ball so read is also kept with its speed and lift
-//! direction: a launcher's spin, and a player's, grows with the ball's
-//! speed, and where enough alike balls were read, their spin is weighed
-//! against the bin's for the next ball ([`SpinPrior::ball_scale`]).
+//! A ball whose own spin was read, by the ceiling camera or from its
+//! return ([`SpinPrior::take_read`]), tells its scale directly, with the
+//! reading's own uncertainty: it is kept and weighed beside the bounces,
+//! fast spins included (whose contacts slide). Each ball is also kept
+//! with its speed and lift direction, once (its reading in the place of
+//! what its bounce told): a launcher's spin, and a player's, grows with the
+//! ball's speed, and where enough alike balls were read, their spin is
+//! weighed against the bin's for the next ball ([`SpinPrior::ball_scale`]).
 //! Fixed memory ([`BIN_MEMORY`] readings a bin, [`SPEED_MEMORY`] balls),
 //! bounded work.
 
@@ -229,7 +230,7 @@ impl SpinPrior {
     }
 
     /// How many balls' own spin is kept with their speed (at most
-    /// [`SPEED_MEMORY`]).
+    /// `SPEED_MEMORY`).
     pub fn kept_by_speed(&self) -> usize {
         self.by_speed.iter().flatten().count()
     }
@@ -387,13 +388,12 @@ impl SpinPrior {
     }
 
     /// Takes one ball whose own spin was read, by the ceiling camera or from
-    /// its return ([`super::returns`]): `flight` its state as the flight
+    /// its return (`estimator::returns`): `flight` its state as the flight
     /// showed it, `scale` the spin read per unit of the flight's (its σ in
     /// ln: `sigma`), `table` the session's table. Kept in the bin of the
     /// flight's spin parameter, as a bounce is, and with `speed` as
     /// [`Self::take`] keeps it, in the place of what the ball's bounce
     /// told; false (nothing kept) for a scale off the grid or not finite.
-    #[allow(clippy::too_many_arguments)]
     pub fn take_read(
         &mut self,
         flight: &BallState,
