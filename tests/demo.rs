@@ -87,6 +87,9 @@ fn thirty_balls_hit_with_no_late_answers() {
     assert_eq!(r["balls"], 30);
     assert!(r["reachable"].as_u64().unwrap() >= 20, "{}", r["reachable"]);
     assert!(r["hit_rate"].as_f64().unwrap() >= 0.95, "hit rate {}", r["hit_rate"]);
+    // The tracker follows the balls the bat met back over the table.
+    let followed = r["returns_followed"].as_u64().unwrap() as f64;
+    assert!(followed >= 0.9 * r["hits"].as_u64().unwrap() as f64, "{followed} returns followed");
     assert_eq!(r["late_rsi_answers"], 0);
     assert_eq!(r["ended_home"], true);
 }

@@ -29,6 +29,7 @@ use crate::faults::{InjectedCounts, TrackerFaults, inject, plan_datagrams, send_
 use crate::launcher::Launch;
 use crate::mock_krc::{self, MockKrcConfig};
 use crate::render::{BallColour, Scene, Sequence, SequenceOptions, render_sequence};
+use crate::return_feed::ReturnFeed;
 use crate::returns::{BatPath, ContactReport, ReturnFail, ReturnFails, judge_return, timing_window};
 use crate::truth::{Flight, HitTruth};
 use crate::udp_tracker::{capture_time, stream};
@@ -245,6 +246,9 @@ pub struct DemoReport {
     pub ingest: IngestCounters,
     /// What the tracker fault injector did (`None`: a clean stream).
     pub tracker_faults: Option<InjectedCounts>,
+    /// Returns the tracker followed back over the table (the estimator
+    /// reads each ball's spin from its return).
+    pub returns_followed: usize,
     /// Where the balls came from, and the human strokes passed over
     /// because they never reached the robot's half (not balls of the run).
     pub strokes: Strokes,
@@ -404,6 +408,9 @@ pub struct LoopbackRun {
     pub redraws: Redraws,
     /// What the OS refused of [`DemoConfig::tracker_thread`].
     pub tracker_warnings: Vec<RtWarning>,
+    /// Returns the tracker followed back over the table
+    /// (`tracker.follows_returns`, a clean stream).
+    pub returns_followed: usize,
 }
 
 /// Runs the demo end to end and judges every stroke.
@@ -411,6 +418,7 @@ pub fn run(cfg: &DemoConfig, cal: &Calibration) -> std::io::Result<DemoReport> {
     let r = run_loopback(cfg, cal)?;
     let mut report = judge(cal, &cfg.runtime, &r.balls, &r.starts, r.t0, &r.mock, &r.daemon);
     report.tracker_faults = r.injected;
+    report.returns_followed = r.returns_followed;
     report.strokes = cfg.strokes;
     report.strokes_out_of_play = r.redraws;
     Ok(report)
@@ -503,9 +511,10 @@ pub fn run_loopback(cfg: &DemoConfig, cal: &Calibration) -> std::io::Result<Loop
             }
         }
     };
-    let (injected, tracker_warnings) = if cfg.tracker_thread == ThreadSpec::default() {
-        (send()?, Vec::new())
-    } else {
+    let send_all = || -> std::io::Result<_> {
+        if cfg.tracker_thread == ThreadSpec::default() {
+            return Ok((send()?, Vec::new()));
+        }
         let spec = cfg.tracker_thread;
         std::thread::scope(|s| {
             let h = std::thread::Builder::new().name("tracker".into()).spawn_scoped(s, || {
@@ -513,8 +522,20 @@ pub fn run_loopback(cfg: &DemoConfig, cal: &Calibration) -> std::io::Result<Loop
                 send().map(|i| (i, refused))
             })?;
             h.join().map_err(|_| std::io::Error::other("tracker stream panicked"))?
-        })?
+        })
     };
+    // The same tracker follows each return back, on its own thread.
+    let returns_socket = tracker.try_clone()?;
+    let follow = cfg.tracker.follows_returns && cfg.tracker_faults.is_none();
+    let ((injected, tracker_warnings), returns_followed) = std::thread::scope(|s| -> std::io::Result<_> {
+        let returns = follow.then(|| s.spawn(|| follow_returns(&returns_socket, cfg, cal, &balls, &starts, t0, &mock)));
+        let sent = send_all()?;
+        let followed = match returns {
+            Some(h) => h.join().map_err(|_| std::io::Error::other("return stream panicked"))??,
+            None => 0,
+        };
+        Ok((sent, followed))
+    })?;
     if let Some(c) = camera {
         c.join().map_err(|_| std::io::Error::other("crop stream panicked"))??;
     }
@@ -541,7 +562,7 @@ pub fn run_loopback(cfg: &DemoConfig, cal: &Calibration) -> std::io::Result<Loop
     }
     let mock = mock.stop()?;
     let daemon = daemon.join()?;
-    Ok(LoopbackRun { balls, starts, t0, mock, daemon, injected, redraws, tracker_warnings })
+    Ok(LoopbackRun { balls, starts, t0, mock, daemon, injected, redraws, tracker_warnings, returns_followed })
 }
 
 /// The daemon configuration the demo amounts to (tracker noise and latency).
@@ -657,6 +678,7 @@ fn judge(
         warnings: summary.warnings.iter().map(|w| w.to_string()).collect(),
         ingest: summary.ingest,
         tracker_faults: None,
+        returns_followed: 0,
         strokes: Strokes::Launcher,
         strokes_out_of_play: Redraws::default(),
         poscorr_clamped: mock.poscorr_clamped,
@@ -677,6 +699,34 @@ fn judge(
         },
         per_ball,
     }
+}
+
+/// The tracker following each ball's return back over the table on the
+/// wall clock ([`ReturnFeed`]: the contact found on the mock's path so
+/// far), sent over `socket` as each frame arrives; the returns followed.
+fn follow_returns(
+    socket: &UdpSocket,
+    cfg: &DemoConfig,
+    cal: &Calibration,
+    balls: &[SimBall],
+    starts: &[f64],
+    t0: Instant,
+    mock: &mock_krc::MockHandle,
+) -> std::io::Result<usize> {
+    let mut feed = ReturnFeed::new(cfg.seed, cfg.tracker);
+    while let Some(due) = feed.due(balls, starts, t0) {
+        clock::sleep_until(due, Duration::from_micros(0));
+        feed.find(cal, balls, starts, t0, &mock.recent_path(), &[], clock::now());
+        while let Some(d) = feed.pop() {
+            clock::sleep_until(d.at, Duration::from_micros(0));
+            match socket.send(d.bytes()) {
+                Ok(_) => {}
+                Err(e) if e.kind() == std::io::ErrorKind::ConnectionRefused => {}
+                Err(e) => return Err(e),
+            }
+        }
+    }
+    Ok(feed.seen)
 }
 
 /// Where a ball is judged ([`judged`]).

@@ -3,6 +3,7 @@
 //! cycle's deadline, closes the cycle, logs the path. In process on a
 //! thread ([`spawn`]) or blocking ([`run`]).
 
+use std::collections::VecDeque;
 use std::io;
 use std::net::SocketAddr;
 use std::path::Path;
@@ -224,12 +225,17 @@ pub struct MockHandle {
     join: JoinHandle<io::Result<MockResult>>,
 }
 
+/// Cycles of the path a running mock keeps for its owner (0.5 s at 4 ms).
+const RECENT_PATH: usize = 128;
+
 /// Between a running mock and its owner: a move asked for (taken at the
-/// next cycle's start) and the actual pose after the last cycle.
+/// next cycle's start), the actual pose after the last cycle and the
+/// last [`RECENT_PATH`] cycles of the path.
 #[derive(Debug, Default)]
 struct JogPort {
     to: Mutex<Option<[f64; 6]>>,
     actual: Mutex<Option<[f64; 6]>>,
+    recent: Mutex<VecDeque<PathSample>>,
 }
 
 impl MockHandle {
@@ -248,6 +254,11 @@ impl MockHandle {
     /// The actual pose (`RIst`) after the last cycle, `None` before the first.
     pub fn actual(&self) -> Option<[f64; 6]> {
         *self.jog.actual.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// The path's last cycles (at most 0.5 s), oldest first.
+    pub fn recent_path(&self) -> Vec<PathSample> {
+        self.jog.recent.lock().unwrap_or_else(|e| e.into_inner()).iter().copied().collect()
     }
 
     /// Waits for the mock to finish by itself (cycle count, stop by limit).
@@ -336,6 +347,11 @@ fn cycle_loop<L: Link>(
         let sample = ctrl.end_cycle(t_k + cycle);
         if let Some(j) = jog {
             *j.actual.lock().unwrap_or_else(|e| e.into_inner()) = Some(sample.actual);
+            let mut recent = j.recent.lock().unwrap_or_else(|e| e.into_inner());
+            if recent.len() == RECENT_PATH {
+                recent.pop_front();
+            }
+            recent.push_back(sample);
         }
         out.path.push(sample);
         k += 1;
