@@ -409,7 +409,7 @@ pub struct LoopbackRun {
     /// What the OS refused of [`DemoConfig::tracker_thread`].
     pub tracker_warnings: Vec<RtWarning>,
     /// Returns the tracker followed back over the table
-    /// (`tracker.follows_returns`, a clean stream).
+    /// (`tracker.follows_returns`).
     pub returns_followed: usize,
 }
 
@@ -526,7 +526,7 @@ pub fn run_loopback(cfg: &DemoConfig, cal: &Calibration) -> std::io::Result<Loop
     };
     // The same tracker follows each return back, on its own thread.
     let returns_socket = tracker.try_clone()?;
-    let follow = cfg.tracker.follows_returns && cfg.tracker_faults.is_none();
+    let follow = cfg.tracker.follows_returns;
     let ((injected, tracker_warnings), returns_followed) = std::thread::scope(|s| -> std::io::Result<_> {
         let returns = follow.then(|| s.spawn(|| follow_returns(&returns_socket, cfg, cal, &balls, &starts, t0, &mock)));
         let sent = send_all()?;

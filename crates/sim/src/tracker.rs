@@ -28,9 +28,9 @@ pub struct TrackerModel {
     pub latency: f64,
     /// Frames after the flight's end still reported, s.
     pub end_after: f64,
-    /// The ball is followed back after the robot's stroke (the virtual
-    /// cell's returns, [`crate::virtual_cell`]), as a real cell's cameras
-    /// see it.
+    /// The ball is followed back after the robot's stroke, as a real
+    /// cell's cameras see it (the virtual cell and the loopback demo find
+    /// each contact on the bat's path and send the return's frames).
     pub follows_returns: bool,
 }
 

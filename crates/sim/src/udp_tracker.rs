@@ -30,9 +30,8 @@ pub(crate) fn capture_time(t0: Instant, start: f64, t: f64) -> Instant {
 
 /// Sends the observations of `balls` (ball k launched `starts[k]` s after
 /// `t0`) over the connected `socket`, each at capture + `latency`, until
-/// done or `stop`; each ball's sequence numbers
-/// [`crate::faults::RETURN_SEQ_ROOM`] after the last's (as
-/// `plan_datagrams` numbers them).
+/// done or `stop`; each ball's sequence numbers 256 after the last's
+/// (room for its return's frames, as `plan_datagrams` numbers them).
 pub fn stream(
     socket: &UdpSocket,
     balls: &[SimBall],
