@@ -716,7 +716,10 @@ fn follow_returns(
     let mut feed = ReturnFeed::new(cfg.seed, cfg.tracker);
     while let Some(due) = feed.due(balls, starts, t0) {
         clock::sleep_until(due, Duration::from_micros(0));
-        feed.find(cal, balls, starts, t0, &mock.recent_path(), &[], clock::now());
+        // The daemon's plans are its own: where the ball meets the window.
+        let k = feed.next_ball();
+        let crossing = judged(cal, &balls[k], t0, starts[k], &[]).map(|j| j.hit.t);
+        feed.find(cal, balls, starts, t0, &mock.recent_path(), crossing, clock::now());
         while let Some(d) = feed.pop() {
             clock::sleep_until(d.at, Duration::from_micros(0));
             match socket.send(d.bytes()) {

@@ -14,7 +14,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 use super::SimBall;
-use super::udp_tracker::{StreamStats, capture_time};
+use super::udp_tracker::{RETURN_SEQ_ROOM, StreamStats, capture_time};
 use topspin_core::time::{Duration, Instant};
 use topspin_core::wire::{OBSERVATION_LEN, Observation, ObservationPacket};
 use topspin_daemon::clock;
@@ -145,10 +145,6 @@ pub(crate) fn observation(seq: u32, capture: Instant, pos: [f32; 3]) -> Planned 
     bytes[..OBSERVATION_LEN].copy_from_slice(&buf);
     Planned { at: capture, from: Sender::Tracker, len: OBSERVATION_LEN, bytes }
 }
-
-/// Sequence numbers the tracker leaves after each ball's observations for
-/// the frames that see its return ([`crate::return_feed`]).
-pub(crate) const RETURN_SEQ_ROOM: u32 = 256;
 
 /// The first sequence number after ball `k`'s observations in
 /// [`plan_datagrams`]: its return's.

@@ -18,7 +18,6 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
 
-use crate::demo::judged;
 use crate::faults::{Planned, observation, return_seq};
 use crate::mock_krc::PathSample;
 use crate::returns::{BatPath, judge_return};
@@ -26,7 +25,6 @@ use crate::udp_tracker::capture_time;
 use crate::{SimBall, TrackerModel};
 use topspin_core::calib::Calibration;
 use topspin_core::physics::{Event, StopAt, Vec3};
-use topspin_core::plan::StrikePlan;
 use topspin_core::time::{Duration, Instant};
 
 /// A ball's return is found this long after its true crossing of the
@@ -71,8 +69,14 @@ impl ReturnFeed {
         Some(capture_time(t0, starts[k], ball.truth.end_t + JUDGE_AFTER_S))
     }
 
+    /// The ball whose return is found next.
+    pub(crate) fn next_ball(&self) -> usize {
+        self.next_ball
+    }
+
     /// Finds the next ball's return on the bat's `path` so far (at `now`),
-    /// and queues the frames that see it after `now`.
+    /// near its true crossing `crossing` (s after its launch; the judge's,
+    /// `demo::judged`), and queues the frames that see it after `now`.
     #[allow(clippy::too_many_arguments)]
     pub(crate) fn find(
         &mut self,
@@ -81,18 +85,18 @@ impl ReturnFeed {
         starts: &[f64],
         t0: Instant,
         path: &[PathSample],
-        last_plans: &[StrikePlan],
+        crossing: Option<f64>,
         now: Instant,
     ) {
         let k = self.next_ball;
         self.next_ball += 1;
         let ball = &balls[k];
-        let Some(j) = judged(cal, ball, t0, starts[k], last_plans) else { return };
+        let Some(crossing) = crossing else { return };
         let from = now.0.saturating_sub(Duration::from_nanos((PATH_BEFORE_S * 1e9) as u64).0);
         let recent = &path[path.partition_point(|s| s.t.0 < from)..];
         let bat = BatPath::new(&cal.robot, recent);
         let launched = capture_time(t0, starts[k], 0.0);
-        let judgement = judge_return(cal, &ball.physics, &ball.truth.to_launch(), launched, j.hit.t, &bat);
+        let judgement = judge_return(cal, &ball.physics, &ball.truth.to_launch(), launched, crossing, &bat);
         let Some((t_touch, mut out)) = judgement.after else { return };
         self.seen += 1;
         let latency = Duration::from_nanos((self.tracker.latency.max(0.0) * 1e9) as u64);

@@ -28,10 +28,15 @@ pub(crate) fn capture_time(t0: Instant, start: f64, t: f64) -> Instant {
     t0 + Duration::from_nanos(((start + t) * 1e9).round() as u64)
 }
 
+/// Sequence numbers the tracker leaves after each ball's observations for
+/// the frames that see its return (`return_feed`).
+pub(crate) const RETURN_SEQ_ROOM: u32 = 256;
+
 /// Sends the observations of `balls` (ball k launched `starts[k]` s after
 /// `t0`) over the connected `socket`, each at capture + `latency`, until
-/// done or `stop`; each ball's sequence numbers 256 after the last's
-/// (room for its return's frames, as `plan_datagrams` numbers them).
+/// done or `stop`; each ball's sequence numbers `RETURN_SEQ_ROOM` after
+/// the last's (room for its return's frames, as `plan_datagrams` numbers
+/// them).
 pub fn stream(
     socket: &UdpSocket,
     balls: &[SimBall],
@@ -71,7 +76,7 @@ pub fn stream(
             }
             seq = seq.wrapping_add(1);
         }
-        seq = seq.wrapping_add(crate::faults::RETURN_SEQ_ROOM);
+        seq = seq.wrapping_add(RETURN_SEQ_ROOM);
     }
     Ok(stats)
 }

@@ -15,7 +15,7 @@
 
 use std::net::{IpAddr, Ipv4Addr, SocketAddr};
 
-use crate::demo::{BallVerdict, DemoConfig, LEAD_IN, demo_daemon_config, judge_strokes, render_crops};
+use crate::demo::{BallVerdict, DemoConfig, LEAD_IN, demo_daemon_config, judge_strokes, judged, render_crops};
 use crate::faults::{InjectedCounts, Sender, inject, plan_datagrams};
 use crate::mock_krc::{Faults, MockKrcConfig, MockResult};
 use crate::pair::Pair;
@@ -178,7 +178,9 @@ pub fn run_virtual(cfg: &DemoConfig, cal: &Calibration) -> VirtualRun {
         // and datagrams in the order they arrive.
         let request_arrives = pair.now() + pair.timing.request_latency;
         while cfg.tracker.follows_returns && returns.due(&balls, &starts, t0).is_some_and(|t| t <= pair.now()) {
-            returns.find(cal, &balls, &starts, t0, &path, &last_plans, pair.now());
+            let k = returns.next_ball();
+            let crossing = judged(cal, &balls[k], t0, starts[k], &last_plans).map(|j| j.hit.t);
+            returns.find(cal, &balls, &starts, t0, &path, crossing, pair.now());
         }
         loop {
             // The tracker's next datagram: a ball's flight or a return's.
