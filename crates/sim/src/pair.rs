@@ -143,6 +143,11 @@ impl Pair {
         }
     }
 
+    /// The controller's path so far, one sample a cycle.
+    pub fn path(&self) -> &[PathSample] {
+        &self.result.path
+    }
+
     /// The session's events so far, oldest first (drained).
     pub fn take_events(&mut self) -> Vec<SessionEvent> {
         std::mem::take(&mut self.events)

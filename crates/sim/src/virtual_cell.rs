@@ -153,7 +153,6 @@ pub fn run_virtual(cfg: &DemoConfig, cal: &Calibration) -> VirtualRun {
     });
     let mut logo_spins = LogoSpins::default();
     let mut returns = ReturnFeed::new(cfg.seed, cfg.tracker);
-    let mut path = Vec::new();
     let mut last_plans: Vec<StrikePlan> = Vec::new();
     let mut next = 0;
     let mut home_since: Option<Instant> = None;
@@ -180,7 +179,7 @@ pub fn run_virtual(cfg: &DemoConfig, cal: &Calibration) -> VirtualRun {
         while cfg.tracker.follows_returns && returns.due(&balls, &starts, t0).is_some_and(|t| t <= pair.now()) {
             let k = returns.next_ball();
             let crossing = judged(cal, &balls[k], t0, starts[k], &last_plans).map(|j| j.hit.t);
-            returns.find(cal, &balls, &starts, t0, &path, crossing, pair.now());
+            returns.find(cal, &balls, &starts, t0, pair.path(), crossing, pair.now());
         }
         loop {
             // The tracker's next datagram: a ball's flight or a return's.
@@ -222,9 +221,8 @@ pub fn run_virtual(cfg: &DemoConfig, cal: &Calibration) -> VirtualRun {
         if let Some(spin) = camera.as_mut().and_then(|c| c.stream.poll(request_arrives)) {
             logo_spins.count(estimator.observe_logo_spin(&spin));
         }
-        match pair.step() {
-            Some(sample) => path.push(sample),
-            None => break, // RSI stopped: the controller would need a restart
+        if pair.step().is_none() {
+            break; // RSI stopped: the controller would need a restart
         }
     }
     let mock = pair.result();

@@ -120,7 +120,8 @@ impl Watch {
             racket.hit(&ball, &st.normal, &st.bat_vel).map(|i| i.after)
         };
         // The flight's pull over the few frames watched, as at the return
-        // the stroke was planned for, then as at the spin read from it.
+        // of the spin the flight showed (scale 1), then as at the spin
+        // read from it.
         let pull = |k: f64| leaving(k).map(|b| flight.accel(&b.vel, &b.spin));
         let first = scan(&self.samples, st, &leaving, &pull(1.0)?, sigma)?;
         scan(&self.samples, st, &leaving, &pull(first.scale)?, sigma)
@@ -193,6 +194,11 @@ mod tests {
     use crate::calib::Calibration;
     use crate::physics::{Event, StopAt};
 
+    /// Flies `ball` to time `to` (bounces included).
+    fn fly(prop: &crate::physics::Propagator, ball: &mut BallState, t: &mut f64, to: f64) {
+        while matches!(prop.advance(ball, t, &StopAt::time(to)), Event::Bounce { .. }) {}
+    }
+
     /// A topspin ball after its bounce, met by a closed face moving at
     /// 0.5 m/s, and the tracker's view of the return (every 1/150 s from
     /// two frames after the hit, noise-free).
@@ -203,7 +209,7 @@ mod tests {
         let after = table.apply(&BallState { spin: before.spin * true_scale, ..before });
         let (mut ball, mut t) = (after, 0.0);
         ball.pos.z = prop.bounce.radius;
-        while matches!(prop.advance(&mut ball, &mut t, &StopAt::time(0.1)), Event::Bounce { .. }) {}
+        fly(&prop, &mut ball, &mut t, 0.1);
         let tilt: f64 = -0.4;
         let normal = Vec3::new(-tilt.cos(), 0.0, tilt.sin());
         let bat_vel = normal * 0.5;
@@ -223,7 +229,7 @@ mod tests {
         let samples = (2..2 + RETURN_SAMPLES)
             .map(|i| {
                 let at = t + i as f64 / 150.0;
-                while matches!(prop.advance(&mut out, &mut t_out, &StopAt::time(at)), Event::Bounce { .. }) {}
+                fly(&prop, &mut out, &mut t_out, at);
                 Sample::new(t_out, out.pos)
             })
             .collect();
@@ -265,11 +271,6 @@ mod tests {
         let on: Vec<Sample> =
             samples.iter().map(|s| Sample::new(s.t, stroke.pos + stroke.vel * (s.t - stroke.t_hit))).collect();
         assert!(read(&cal, stroke, &on).is_none(), "the ball flew on");
-    }
-
-    /// Flies `ball` to time `to` (bounces included).
-    fn fly(prop: &crate::physics::Propagator, ball: &mut BallState, t: &mut f64, to: f64) {
-        while matches!(prop.advance(ball, t, &StopAt::time(to)), Event::Bounce { .. }) {}
     }
 
     #[test]

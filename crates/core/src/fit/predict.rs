@@ -215,14 +215,13 @@ mod tests {
 
     #[test]
     fn crossings_resumed_at_the_predicted_bounce_are_the_same() {
+        use rand::{Rng, SeedableRng};
+        use rand_chacha::ChaCha8Rng;
         let cal = Calibration::default_cell();
         let prop = cal.propagator();
         let planes = [1.45, 1.50, 1.55, 1.60];
-        let mut rng_state = 7u64;
-        let mut next = || {
-            rng_state = rng_state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            (rng_state >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rng = ChaCha8Rng::seed_from_u64(7);
+        let mut next = || rng.random::<f64>();
         let mut resumed = 0;
         for _ in 0..200 {
             let s = BallState::new(
