@@ -72,6 +72,10 @@ pub(crate) fn spin_parameter(state: &BallState, radius: f64) -> f64 {
 
 /// Balls whose own spin the prior keeps with their speed (the latest).
 const SPEED_MEMORY: usize = 48;
+/// Bounds of one ball's scale where alike balls weigh in: wider than the
+/// bins' grid, since a saturated flight of a fast spin may show a sixth of
+/// it (the spin it gives lies between the bins' and the alike balls').
+const BALL_SCALE_BOUNDS: (f64, f64) = (0.25, 8.0);
 /// Width of the kernel in ln(speed) over which balls count as alike.
 const SPEED_KERNEL: f64 = 0.08;
 /// Least summed kernel weight of alike balls for their spin to count: one
@@ -113,6 +117,10 @@ struct SpinSeen {
     ln_speed: f64,
     class: i8,
     ln_spin: f64,
+    /// ln of the spin its flight showed at the contact, and the spin
+    /// parameter there: what the bins would make of it.
+    ln_flight: f64,
+    s: f64,
     /// The ball's track: a ball is kept once, with its best reading.
     ball: u32,
     /// Its own spin was read (the camera, its return), not bounded or
@@ -190,6 +198,15 @@ impl Bin {
     fn has_own_share(&self) -> bool {
         self.seen.iter().flatten().count() >= MIN_FOR_SHARE
     }
+}
+
+/// The spin of the balls alike to one (their speed and lift direction),
+/// in ln(spin): their mean and its σ for the next ball, and how far the
+/// bins' scale times each one's flight spin missed its spin (RMS).
+struct Alike {
+    mean: f64,
+    spread: f64,
+    bin_miss: f64,
 }
 
 /// One ball's spin scale from the session ([`SpinPrior::ball_scale`]).
@@ -280,25 +297,31 @@ impl SpinPrior {
         if !(w > 0.0 && w.is_finite()) {
             return bin;
         }
-        let Some((mean, spread)) = self.spin_by_speed(state, speed) else { return bin };
-        // Inverse-variance weighting in ln(spin).
-        let (a, b) = (1.0 / (bin.share * bin.share), 1.0 / (spread * spread));
+        let Some(alike) = self.spin_by_speed(state, speed) else { return bin };
+        // Inverse-variance weighting in ln(spin). The bin's spread is of
+        // the scale its bounces need; how far its scale times a flight's
+        // spin strays from the spin the alike balls had counts as well
+        // (where the lift saturates, flights of one spin read it ×0.5–1).
+        let bin_share = bin.share.max(alike.bin_miss);
+        let (a, b) = (1.0 / (bin_share * bin_share), 1.0 / (alike.spread * alike.spread));
+        let mean = alike.mean;
         let ln_w = ((w * bin.scale).ln() * a + mean * b) / (a + b);
-        let scale = (ln_w.exp() / w).clamp(grid(0), grid(SCALE_GRID - 1));
+        let scale = (ln_w.exp() / w).clamp(BALL_SCALE_BOUNDS.0, BALL_SCALE_BOUNDS.1);
         let hedge = (1.0 / (bin.hedge.powi(-2) + b)).sqrt();
         BallScale { scale, share: (1.0 / (a + b)).sqrt(), hedge }
     }
 
-    /// The mean and σ of ln(spin) of the balls of `state`'s speed and
-    /// lift direction, kernel-weighted in ln(speed); `None` with too few.
-    fn spin_by_speed(&self, state: &BallState, speed: f64) -> Option<(f64, f64)> {
+    /// The balls of `state`'s speed and lift direction, kernel-weighted
+    /// in ln(speed); `None` with too few.
+    fn spin_by_speed(&self, state: &BallState, speed: f64) -> Option<Alike> {
         let (ln_v, class) = (speed.ln(), lift_class(state));
-        let (mut sw, mut sx, mut sxx) = (0.0, 0.0, 0.0);
+        let (mut sw, mut sx, mut sxx, mut smiss) = (0.0, 0.0, 0.0, 0.0);
         for seen in self.by_speed.iter().flatten().filter(|b| b.class == class) {
             let w = (-0.5 * ((seen.ln_speed - ln_v) / SPEED_KERNEL).powi(2)).exp();
             sw += w;
             sx += w * seen.ln_spin;
             sxx += w * seen.ln_spin * seen.ln_spin;
+            smiss += w * (seen.ln_flight + self.scale_at(seen.s).ln() - seen.ln_spin).powi(2);
         }
         if sw.is_nan() || sw < SPEED_MIN_WEIGHT {
             return None;
@@ -306,18 +329,19 @@ impl SpinPrior {
         let mean = sx / sw;
         let var = (sxx / sw - mean * mean).max(SPEED_SHARE_FLOOR * SPEED_SHARE_FLOOR);
         // The spread of alike balls, and the mean's own uncertainty.
-        Some((mean, (var * (1.0 + 1.0 / sw)).sqrt()))
+        Some(Alike { mean, spread: (var * (1.0 + 1.0 / sw)).sqrt(), bin_miss: (smiss / sw).sqrt() })
     }
 
     /// Keeps `ball`'s spin with its speed `v` (`read`: its own spin was
     /// read), in the place of what it kept of that ball before unless
     /// that was read and this is not.
-    fn remember_spin(&mut self, flight: &BallState, scale: f64, v: f64, ball: u32, read: bool) {
+    fn remember_spin(&mut self, flight: &BallState, s: f64, scale: f64, v: f64, ball: u32, read: bool) {
         let w = flight.spin.norm() * scale;
-        if !(w > 0.0 && w.is_finite() && v > 0.0 && v.is_finite()) {
+        if !(w > 0.0 && w.is_finite() && v > 0.0 && v.is_finite() && s.is_finite()) {
             return;
         }
-        let seen = SpinSeen { ln_speed: v.ln(), class: lift_class(flight), ln_spin: w.ln(), ball, read };
+        let ln_flight = flight.spin.norm().ln();
+        let seen = SpinSeen { ln_speed: v.ln(), class: lift_class(flight), ln_spin: w.ln(), ln_flight, s, ball, read };
         match self.by_speed.iter().position(|s| s.is_some_and(|s| s.ball == ball)) {
             Some(k) if self.by_speed[k].is_some_and(|s| s.read && !read) => {}
             Some(k) => self.by_speed[k] = Some(seen),
@@ -383,7 +407,7 @@ impl SpinPrior {
         let remembered =
             if bounded_below_only(hi) { (grid(lo) * slid_above_bound()).max(bin) } else { own_scale((lo, hi), bin) };
         self.keep(seen, s, &table);
-        self.remember_spin(before, remembered, speed, ball, false);
+        self.remember_spin(before, s, remembered, speed, ball, false);
         true
     }
 
@@ -408,8 +432,9 @@ impl SpinPrior {
             return false;
         }
         let table = table.with_spin_scale(1.0);
-        self.keep(Seen::Read { ln_scale: scale.ln(), sigma }, spin_parameter(flight, table.radius), &table);
-        self.remember_spin(flight, scale, speed, ball, true);
+        let s = spin_parameter(flight, table.radius);
+        self.keep(Seen::Read { ln_scale: scale.ln(), sigma }, s, &table);
+        self.remember_spin(flight, s, scale, speed, ball, true);
         true
     }
 
@@ -603,7 +628,7 @@ mod tests {
         let (lo, hi) = fitting(&costs);
         assert!(bounded_below_only(hi), "only bounded from below");
         assert!(prior.take(&shown(200.0), &after, &var, &table, 5.83, 108));
-        let (mean, _) = prior.spin_by_speed(&shown(200.0), 5.83).expect("one alike ball");
+        let mean = prior.spin_by_speed(&shown(200.0), 5.83).expect("one alike ball").mean;
         let bound = 200.0 * grid(lo);
         assert!((mean.exp() - bound * slid_above_bound()).abs() < 1e-9 * bound, "{} vs {bound}", mean.exp());
         let steeper = |w: f64| BallState::new(Vec3::zeros(), Vec3::new(5.0, 0.0, -3.6), Vec3::new(0.0, w, 0.0));
@@ -611,6 +636,34 @@ mod tests {
         let kick = table.with_spin_scale(next.scale).apply(&steeper(200.0)).vel.x;
         let truth = table.apply(&steeper(600.0)).vel.x;
         assert!((kick - truth).abs() < 0.02, "×{}: {kick} vs {truth}", next.scale);
+    }
+
+    /// Balls of one speed and spin whose saturated flights showed it
+    /// ×0.25–0.6 (real balls' lift differs by ±25 %, and past S 0.5 it
+    /// barely grows), in bins that balls of another speed taught ×2 with
+    /// little spread: the bins' scale times a flight's spin misses the
+    /// alike balls' spin by far more than the bins' spread, so the next
+    /// alike ball takes their spin. Weighed by the bins' spread alone, it
+    /// was given 0.6 of it.
+    #[test]
+    fn alike_balls_outweigh_bins_that_miss_them() {
+        let table = BounceModel::new(0.92, 0.2, R);
+        let mut prior = SpinPrior::default();
+        let shown_as = [150.0, 350.0, 200.0, 300.0, 250.0, 180.0, 320.0, 220.0];
+        for (k, w) in shown_as.iter().enumerate() {
+            assert!(prior.take_read(&shown(*w), 600.0 / w, 0.05, &table, 5.83, k as u32));
+        }
+        // Shown at S 0.51 (the bin at 0.4) and 1.03 (at 0.8): each bin
+        // holds only these.
+        for k in 0..2 * BIN_MEMORY {
+            let w = [150.0, 300.0][k % 2];
+            assert!(prior.take_read(&shown(w), 2.0, 0.05, &table, 3.0, 100 + k as u32));
+        }
+        assert!(prior.shares()[2..].iter().all(|s| *s < 0.1), "{:?}", prior.shares());
+        for w in [150.0, 240.0, 350.0] {
+            let spin = prior.ball_scale(&shown(w), R, 5.83).scale * w;
+            assert!((spin / 600.0 - 1.0).abs() < 0.1, "shown {w}: {spin:.0} rad/s, the balls' 600");
+        }
     }
 
     /// One wild bounce among many good ones moves the bin's scale little.
