@@ -301,11 +301,11 @@ impl SpinPrior {
         // Inverse-variance weighting in ln(spin). The bin's spread is of
         // the scale its bounces need; how far its scale times a flight's
         // spin strays from the spin the alike balls had counts as well
-        // (where the lift saturates, flights of one spin read it ×0.5–1).
+        // (where the lift saturates, flights of one spin show a third of
+        // it to nearly all).
         let bin_share = bin.share.max(alike.bin_miss);
         let (a, b) = (1.0 / (bin_share * bin_share), 1.0 / (alike.spread * alike.spread));
-        let mean = alike.mean;
-        let ln_w = ((w * bin.scale).ln() * a + mean * b) / (a + b);
+        let ln_w = ((w * bin.scale).ln() * a + alike.mean * b) / (a + b);
         let scale = (ln_w.exp() / w).clamp(BALL_SCALE_BOUNDS.0, BALL_SCALE_BOUNDS.1);
         let hedge = (1.0 / (bin.hedge.powi(-2) + b)).sqrt();
         BallScale { scale, share: (1.0 / (a + b)).sqrt(), hedge }

@@ -511,7 +511,8 @@ mod tests {
     /// low), while sidespin balls, whose spin gives no forward kick, get
     /// theirs right; on our own physics topspin's is right too. (Since
     /// the speed memory keeps a slid ball above its bound, real-rally's
-    /// topspin is 0.12 m/s short at the median, was 0.3–0.9.)
+    /// topspin was 0.12 m/s short at the median, before 0.3–0.9; since
+    /// the bins' miss weighs the alike balls, 0.06.)
     #[test]
     fn the_kick_error_shows_why_topspin_plans_come_late_on_real_balls() {
         let cal = Calibration::default_cell();
@@ -529,7 +530,10 @@ mod tests {
             (at("topspin-high"), at("sidespin-high"))
         };
         let (top, side) = kicks(Some("real-rally"));
-        assert!(top < -0.08 && side.abs() < 0.05, "real-rally: topspin {top:+.2}, sidespin {side:+.2} m/s");
+        assert!(
+            top < -0.04 && top < -side.abs() && side.abs() < 0.05,
+            "real-rally: topspin {top:+.2}, sidespin {side:+.2} m/s"
+        );
         let (top, side) = kicks(None);
         assert!(top.abs() < 0.2 && side.abs() < 0.1, "ours: topspin {top:+.2}, sidespin {side:+.2} m/s");
     }
