@@ -183,9 +183,9 @@ pub fn run_virtual(cfg: &DemoConfig, cal: &Calibration) -> VirtualRun {
         }
         loop {
             // The tracker's next datagram: a ball's flight or a return's.
-            let from_return = returns.next_arrival().is_some_and(|r| datagrams.get(next).is_none_or(|d| r < d.at));
-            let tracker_at = if from_return { returns.next_arrival() } else { datagrams.get(next).map(|d| d.at) }
-                .filter(|t| *t <= request_arrives);
+            let (return_at, flight_at) = (returns.next_arrival(), datagrams.get(next).map(|d| d.at));
+            let from_return = return_at.is_some_and(|r| flight_at.is_none_or(|f| r < f));
+            let tracker_at = if from_return { return_at } else { flight_at }.filter(|t| *t <= request_arrives);
             let crop_at = camera.as_ref().and_then(Camera::next_arrival).filter(|t| *t <= request_arrives);
             if let (Some(c), Some(cam)) = (crop_at, camera.as_mut())
                 && tracker_at.is_none_or(|t| c < t)

@@ -414,8 +414,11 @@ impl SpinPrior {
     /// Takes one ball whose own spin was read, by the ceiling camera or from
     /// its return (`estimator::returns`): `flight` its state as the flight
     /// showed it, `scale` the spin read per unit of the flight's (its σ in
-    /// ln: `sigma`), `table` the session's table. Kept in the bin of the
-    /// flight's spin parameter, as a bounce is, and with `speed` as
+    /// ln: `sigma`), `table` the table the bin's kept bounces are costed
+    /// against when its scale is found anew (the estimator passes the
+    /// calibration's here, the session's with a bounce: passing the
+    /// session's here too was measured and not kept). Kept in the bin of
+    /// the flight's spin parameter, as a bounce is, and with `speed` as
     /// [`Self::take`] keeps it, in the place of what the ball's bounce
     /// told; false (nothing kept) for a scale off the grid or not finite.
     pub fn take_read(
