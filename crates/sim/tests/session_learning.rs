@@ -320,3 +320,47 @@ fn the_cameras_spin_gives_the_ball_its_size_and_teaches_the_session() {
     assert!(off(seen) < 0.10, "with the camera: {seen} against {truth}");
     assert!(taught >= 1, "the session kept the reading");
 }
+
+#[test]
+fn a_bounce_that_surprised_the_filter_keeps_the_track_and_teaches_the_session() {
+    // A session's first fast topspin balls in air measured on real balls:
+    // the flight reads their spin at a third to a half, the table kicks
+    // them forward far more than that spin would, and the first samples
+    // after the bounce fall outside the gate. Lost there, the ball would
+    // be picked up again as a new track with no bounce, and the session
+    // would learn nothing from the balls it most needs. The bounce is
+    // flown again with the spin's size free, once: one track, its bounce
+    // learned, and its plans after the bounce on time.
+    let cal = Calibration::default_cell();
+    let world = world_named(&cal, "real-rally").unwrap();
+    let (balls, launches) = session(&world, &cal, 27);
+    let mut surprised = 0;
+    for (k, ball) in balls.iter().enumerate().filter(|(_, b)| b.truth.setting.to_string().starts_with("topspin")) {
+        let (t0, setting) = (launches[k], ball.truth.setting);
+        let hit = ball.truth.hit.as_ref().expect("it crosses the hitting plane");
+        // Each as a session's first ball.
+        let mut est = Estimator::new(&cal, config(LearnConfig::default()));
+        let (mut events, mut last) = (Vec::new(), None);
+        for o in &ball.observations {
+            let out = est.observe(Instant::from_secs_f64(t0 + o.t), o.pos);
+            last = out.plan.or(last);
+            events.extend(out.events);
+        }
+        let mut out = Default::default();
+        est.poll(Instant::from_secs_f64(t0 + 5.0), &mut out);
+        events.extend(out.events);
+        if est.session().surprised == 0 {
+            continue;
+        }
+        surprised += 1;
+        let count = |f: &dyn Fn(&EstimatorEvent) -> bool| events.iter().filter(|e| f(e)).count();
+        assert_eq!(count(&|e| matches!(e, EstimatorEvent::Started { .. })), 1, "{k} {setting}: {events:?}");
+        assert_eq!(count(&|e| matches!(e, EstimatorEvent::Ended { reason: EndReason::Lost, .. })), 0, "{k} {setting}");
+        assert_eq!(count(&|e| matches!(e, EstimatorEvent::Learned { .. })), 1, "{k} {setting}: its bounce taught");
+        assert_eq!(est.session().spin.kept_by_speed(), 1, "{k} {setting}: its spin kept with its speed");
+        let late = last.expect("plans").hit_time.as_secs_f64() - (t0 + hit.t);
+        assert!(late.abs() < 0.003, "{k} {setting}: the last plan {:.1} ms off", late * 1e3);
+    }
+    // Medium and fast topspin, and one slow ball that its lift read low.
+    assert!(surprised >= 5, "{surprised} of the first 9 topspin balls surprised the filter");
+}

@@ -141,6 +141,9 @@ pub struct LearnedSession {
     pub spin: SpinPrior,
     /// Bounces no table explained (learned nothing from).
     pub unexplained: u32,
+    /// Bounces whose first samples surprised the filter, flown again with
+    /// the spin's size free (`estimator::SURPRISE_SHARE`).
+    pub surprised: u32,
     /// Balls whose spin their return read (`estimator::returns`).
     pub returns_read: u32,
 }
@@ -160,6 +163,7 @@ impl LearnedSession {
             bounce_vel: [0, 1, 2].map(|k| Learned::new(bounce_vel_start[k], (0.002, 0.5), 0.1)),
             spin: SpinPrior::default(),
             unexplained: 0,
+            surprised: 0,
             returns_read: 0,
         }
     }

@@ -161,6 +161,17 @@ impl Seen {
     }
 }
 
+/// The scale on the grid that best explains one bounce (`before` the state
+/// at the contact as the flight showed it, `after` the velocity seen just
+/// after it with per-axis variance `var`) under `table`: what a bounce
+/// that surprised the filter is checked against, the spin's size being
+/// what its flight could not tell.
+pub(crate) fn best_scale(before: &BallState, after: &Vec3, var: &Vec3, table: &BounceModel) -> f64 {
+    let costs = Seen::Bounce { before: *before, after: *after, var: *var }.costs(&table.with_spin_scale(1.0));
+    let best = (0..SCALE_GRID).min_by(|&a, &b| costs[a].total_cmp(&costs[b])).unwrap_or(0);
+    grid(best)
+}
+
 /// The grid indices whose cost lies within 1 of the least: the scales
 /// the costs cannot tell apart.
 fn fitting(costs: &[f64; SCALE_GRID]) -> (usize, usize) {
