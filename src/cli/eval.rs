@@ -354,7 +354,7 @@ fn run_stream(a: EvalStreamArgs) -> anyhow::Result<()> {
     let l = &report.learned;
     println!(
         "\nWorld: {}{}. The EKF's session {}: drag × {:.3} of the calibration, table e {:.3}, μ {:.3} \
-         (from {} bounces, {} unexplained), velocity σ left after a bounce {:.2}, {:.2}, {:.2} m/s (x, y, z), \
+         (from {} bounces, {} unexplained, {} flown again), velocity σ left after a bounce {:.2}, {:.2}, {:.2} m/s (x, y, z), \
          spin the table meets per unit of the flight's × {:.2}, {:.2}, {:.2}, {:.2} at S {:?} (σ of its log \
          {:.2}, {:.2}, {:.2}, {:.2}).",
         setup.world.unwrap_or("the calibration's own"),
@@ -369,6 +369,7 @@ fn run_stream(a: EvalStreamArgs) -> anyhow::Result<()> {
         l.friction,
         l.bounces,
         l.unexplained,
+        l.surprised,
         l.bounce_vel[0].sqrt(),
         l.bounce_vel[1].sqrt(),
         l.bounce_vel[2].sqrt(),

@@ -413,7 +413,12 @@ impl Estimator {
     pub fn new(cal: &Calibration, cfg: EstimatorConfig) -> Self {
         let planes = cal.strike.hitting_planes();
         let reach = match cal.strike.aim {
-            AimMode::Landing => planes.iter().map(|x| reach_map(cal, *x)).collect(),
+            // One thread per plane: start-up, not the hot path (each map
+            // is a few thousand inverse kinematics).
+            AimMode::Landing => std::thread::scope(|scope| {
+                let maps: Vec<_> = planes.iter().map(|&x| scope.spawn(move || reach_map(cal, x))).collect();
+                maps.into_iter().map(|m| m.join().expect("a reach map's thread panicked")).collect()
+            }),
             AimMode::Paper => Vec::new(),
         };
         Estimator {

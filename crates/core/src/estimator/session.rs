@@ -13,7 +13,9 @@
 //! shows ([`LearnedSession::spin`], [`super::spin_prior`]), the next balls' spin
 //! prior. A bounce no table explains (a net-cord ball, the table's edge, a
 //! tracker jump) teaches nothing ([`LearnedSession::unexplained`],
-//! [`bounce_explained`]).
+//! [`bounce_explained`]); one explained only by a spin off the prior's
+//! scale teaches the spin prior alone. [`LearnedSession::surprised`]
+//! counts the bounces flown again with the spin's size free.
 //!
 //! The measurements are bounded in work: the session's drag once per ball
 //! when it bounces (what the ball's batches read, `super::smooth`; where

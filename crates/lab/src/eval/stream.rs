@@ -254,6 +254,7 @@ pub(crate) fn run_estimator(
         spin_scale: s.spin.scales(),
         spin_share: s.spin.shares(),
         unexplained: s.unexplained,
+        surprised: s.surprised,
     };
     (plans, learned)
 }
@@ -279,6 +280,9 @@ pub struct SessionLearned {
     pub spin_share: [f64; SPIN_BINS],
     /// Bounces no table explained.
     pub unexplained: u32,
+    /// Bounces whose first samples surprised the filter, flown again with
+    /// the spin's size free.
+    pub surprised: u32,
 }
 
 impl SessionLearned {
@@ -293,6 +297,7 @@ impl SessionLearned {
             spin_scale: [f64::NAN; SPIN_BINS],
             spin_share: [f64::NAN; SPIN_BINS],
             unexplained: 0,
+            surprised: 0,
         }
     }
 }
