@@ -293,12 +293,13 @@ impl SpinPrior {
         self.interpolate(s, |k, b| b.share.max(FLIGHT_HEDGE[k]))
     }
 
-    /// The scale for one ball as its flight shows it (`speed`: at the
-    /// first sample of its track), the spread of its ln that the filter
-    /// adds at the contact ([`Self::scale_at`], [`Self::share_at`]), and
-    /// the one the aim allows for ([`Self::hedge_at`]): the bin's, weighed
-    /// against the spin that balls of that speed and its lift direction
-    /// came with, where enough such balls were read. A launcher's spin
+    /// The scale for one ball as its flight shows it (`speed`: its speed
+    /// at the net, the same point of every flight), the spread of its ln
+    /// that the filter adds at the contact ([`Self::scale_at`],
+    /// [`Self::share_at`]), and the one the aim allows for
+    /// ([`Self::hedge_at`]): the bin's, weighed against the spin that
+    /// balls of that speed and its lift direction came with, where enough
+    /// such balls were read. A launcher's spin
     /// grows with its speed, as a player's does; where the lift
     /// saturates, a ball's speed tells its spin better than its flight.
     pub fn ball_scale(&self, state: &BallState, radius: f64, speed: f64) -> BallScale {
@@ -386,8 +387,7 @@ impl SpinPrior {
     /// (true), and that bin's scale found anew. `var` holds the flight's
     /// own uncertainty through the contact (not the bin's spread), so that
     /// what fits one kick is what the reading and the tracker leave open.
-    /// `speed`: the ball's at the first sample of its track
-    /// ([`Self::ball_scale`]).
+    /// `speed`: the ball's at the net ([`Self::ball_scale`]).
     pub fn take(
         &mut self,
         before: &BallState,
