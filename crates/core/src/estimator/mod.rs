@@ -285,7 +285,7 @@ struct Track {
     /// Accepted observations after the bounce, short of the hitting plane.
     after: HVec<Sample, AFTER_CAP>,
     /// The filter just before the bounce it has passed: where a bounce
-    /// that surprised it is flown again ([`Estimator::rescue_bounce`]).
+    /// that surprised it is flown again ([`rescue_bounce`]).
     pre_bounce: Option<Ekf>,
     /// The aim of the return (`strike.aim = "landing"`): the next
     /// refinement resumes its searches.
