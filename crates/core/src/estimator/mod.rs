@@ -751,10 +751,7 @@ impl Estimator {
             if !accepted && track.spin_before_bounce.is_none() {
                 // The first sample after the bounce surprised the filter:
                 // the spin the table met may be far from the flight's.
-                let mut wide = track.ekf;
-                wide.noise.bounce_spin_share = wide.noise.bounce_spin_share.max(SURPRISE_SHARE);
-                wide.predict(&track.prop, sample.t);
-                if let Update::Accepted { .. } = wide.update(&sample.pos) {
+                if let Some(wide) = flown_wide(track.ekf, &track.prop, std::iter::once(&sample)) {
                     track.ekf.noise.bounce_spin_share = wide.noise.bounce_spin_share;
                     self.session.surprised = self.session.surprised.saturating_add(1);
                     accepted = true;
@@ -1212,6 +1209,19 @@ pub(crate) const SURPRISE_SHARE: f64 = 1.0;
 /// flown again ([`rescue_bounce`]): 4 at 150 Hz, 27 ms.
 const RESCUE_WITHIN: usize = 4;
 
+/// `ekf` with the bounce's spin share at least [`SURPRISE_SHARE`], flown
+/// through `samples`; `None` where the gate rejects one of them.
+fn flown_wide<'a>(mut ekf: Ekf, prop: &Propagator, samples: impl Iterator<Item = &'a Sample>) -> Option<Ekf> {
+    ekf.noise.bounce_spin_share = ekf.noise.bounce_spin_share.max(SURPRISE_SHARE);
+    for s in samples {
+        ekf.predict(prop, s.t);
+        if let Update::Rejected { .. } = ekf.update(&s.pos) {
+            return None;
+        }
+    }
+    Some(ekf)
+}
+
 /// A sample rejected just after the bounce, where the filter took the
 /// first ones with the spin its flight showed and the kick was larger (a
 /// topspin ball whose spin the flight read at a third): the bounce flown
@@ -1230,14 +1240,7 @@ fn rescue_bounce(track: &mut Track, sample: &Sample, hit_plane_x: f64) -> Option
     {
         return None;
     }
-    let mut wide = pre;
-    wide.noise.bounce_spin_share = SURPRISE_SHARE;
-    for s in track.after.iter().chain(std::iter::once(sample)) {
-        wide.predict(&track.prop, s.t);
-        if let Update::Rejected { .. } = wide.update(&s.pos) {
-            return None;
-        }
-    }
+    let wide = flown_wide(pre, &track.prop, track.after.iter().chain(std::iter::once(sample)))?;
     if wide.bounces != 1 {
         return None;
     }
