@@ -111,6 +111,26 @@ fn stream_prints_one_plan_per_ball() {
 }
 
 #[test]
+fn stream_on_a_plane_of_ones_own_predicts_every_ball_there() {
+    let dir = temp_dir("stream-plane");
+    let status = Command::new(BIN).args(["sim", "--balls", "6", "--seed", "5", "--out"]).arg(&dir).output().unwrap();
+    assert!(status.status.success());
+    let xs = |args: &[&str]| -> Vec<f64> {
+        let out = topspin(args, &dir.join("stream.csv"));
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        let balls: Vec<serde_json::Value> = serde_json::from_slice(&out.stdout).unwrap();
+        balls.iter().filter(|b| !b["plan"].is_null()).map(|b| v3(&b["plan"]["position"])[0]).collect()
+    };
+    // The daemon's planes: the hitting volume, within the arm's reach.
+    let volume = xs(&["fit", "stream", "--json"]);
+    assert!(volume.len() >= 4 && volume.iter().all(|x| (1.45 - 1e-9..=1.60 + 1e-9).contains(x)), "{volume:?}");
+    // One plane asked for, over the table where the arm does not reach:
+    // every ball predicted there, after its bounce.
+    let asked = xs(&["fit", "stream", "--json", "--hit-plane-x", "1.2"]);
+    assert!(asked.len() >= 4 && asked.iter().all(|x| (x - 1.2).abs() < 1e-9), "{asked:?}");
+}
+
+#[test]
 fn unusable_input_exits_2_with_one_line() {
     let dir = temp_dir("bad");
     let good_rows: String =

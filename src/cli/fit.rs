@@ -67,7 +67,9 @@ pub struct FitOptions {
     /// Print one JSON object instead of a summary.
     #[arg(long)]
     pub json: bool,
-    /// The hitting plane x = X in m (default: calib/strike.toml).
+    /// The hitting plane x = X in m (default: calib/strike.toml). With
+    /// `stream`, that plane alone, whether or not the arm reaches it
+    /// (default: the hitting volume, within the arm's reach).
     #[arg(long, value_name = "X")]
     pub hit_plane_x: Option<f64>,
     /// Physics coefficients.
@@ -152,7 +154,7 @@ pub fn run(args: FitArgs) -> anyhow::Result<()> {
     }
     let samples = read_samples(&file)?;
     if stream {
-        return super::replay_stream::run(&samples, &cal, hit_plane_x, args.noise_mm * 1e-3, args.json);
+        return super::replay_stream::run(&samples, &cal, args.hit_plane_x, args.noise_mm * 1e-3, args.json);
     }
     let method = match args.method {
         MethodChoice::Paper => Method::Paper,

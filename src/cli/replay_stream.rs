@@ -21,13 +21,28 @@ struct Ball {
     last: Option<StrikePlan>,
 }
 
-pub fn run(samples: &[Sample], cal: &Calibration, hit_plane_x: f64, noise: f64, json_out: bool) -> anyhow::Result<()> {
+/// Replays `samples` through the estimator of `cal`: where it would meet
+/// each ball (its hitting volume, within the arm's reach), or with
+/// `plane` on the plane x = `plane` alone, whether or not the arm reaches
+/// it (a question about the ball: where and when it crosses there).
+pub fn run(
+    samples: &[Sample],
+    cal: &Calibration,
+    plane: Option<f64>,
+    noise: f64,
+    json_out: bool,
+) -> anyhow::Result<()> {
     if let Some(row) = samples.windows(2).position(|w| w[1].t < w[0].t) {
         return Err(BadInput(format!("data row {}: time goes backwards", row + 1)).into());
     }
     let mut cal = cal.clone();
-    cal.strike.hit_plane_x = hit_plane_x;
-    let mut est = Estimator::new(&cal, EstimatorConfig::default().with_noise(noise));
+    let mut cfg = EstimatorConfig::default().with_noise(noise);
+    if let Some(x) = plane {
+        cal.strike.hit_plane_x = x;
+        cal.strike.hit_depth_x = None;
+        cfg.arm_reach = false;
+    }
+    let mut est = Estimator::new(&cal, cfg);
     let mut balls: Vec<Ball> = Vec::new();
     for s in samples {
         // Recording times may start at 0; the estimator only needs them monotonic.
@@ -75,17 +90,18 @@ pub fn run(samples: &[Sample], cal: &Calibration, hit_plane_x: f64, noise: f64, 
         println!("{}", serde_json::Value::Array(rows));
         return Ok(());
     }
-    println!("ball  start s  plans  hit t s   hit y m  hit z m  spin rps (x, y, z)      β deg  confidence");
+    println!("ball  start s  plans  hit t s   hit x m  hit y m  hit z m  spin rps (x, y, z)      β deg  confidence");
     for b in &balls {
         match b.last {
             Some(p) => {
                 let w = p.spin.map(rad_to_rps);
                 println!(
-                    "{:4}  {:7.3}  {:5}  {:7.3}  {:7.3}  {:7.3}  ({:5.1}, {:5.1}, {:5.1})  {:6.1}  {:.2}",
+                    "{:4}  {:7.3}  {:5}  {:7.3}  {:7.3}  {:7.3}  {:7.3}  ({:5.1}, {:5.1}, {:5.1})  {:6.1}  {:.2}",
                     b.trajectory,
                     b.started,
                     b.plans,
                     p.hit_time.as_secs_f64() - 1.0,
+                    p.position.x,
                     p.position.y,
                     p.position.z,
                     w.x,

@@ -94,6 +94,10 @@ pub struct EstimatorConfig {
     /// Re-read the pre-bounce flight in batches, with its drag, as it
     /// grows (`smooth`): the filter alone reads fast spin low.
     pub smooth: bool,
+    /// Withhold a plan the arm cannot reach (each hitting plane's reach
+    /// map, with the landing aim). Off where the plane is not the arm's
+    /// but a question about the ball (`topspin fit stream --hit-plane-x`).
+    pub arm_reach: bool,
 }
 
 impl Default for EstimatorConfig {
@@ -108,6 +112,7 @@ impl Default for EstimatorConfig {
             spin_prior_along_velocity: crate::fit::refine::RefineConfig::default().prior_along_velocity,
             learn: LearnConfig::default(),
             smooth: true,
+            arm_reach: true,
         }
     }
 }
@@ -417,11 +422,11 @@ impl Estimator {
         let reach = match cal.strike.aim {
             // One thread per plane: start-up, not the hot path (each map
             // is a few thousand inverse kinematics).
-            AimMode::Landing => std::thread::scope(|scope| {
+            AimMode::Landing if cfg.arm_reach => std::thread::scope(|scope| {
                 let maps: Vec<_> = planes.iter().map(|&x| scope.spawn(move || reach_map(cal, x))).collect();
                 maps.into_iter().map(|m| m.join().expect("a reach map's thread panicked")).collect()
             }),
-            AimMode::Paper => Vec::new(),
+            AimMode::Landing | AimMode::Paper => Vec::new(),
         };
         Estimator {
             cfg,

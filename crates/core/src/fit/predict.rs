@@ -69,11 +69,12 @@ pub struct Prediction {
 /// Predicts from `state` at time `t`: the next table contact on the
 /// robot's half and the crossing of the plane x = `hit_plane_x` towards +x
 /// (after at most one bounce there; a serve's bounce on its own half
-/// before it is flown through). `bounced`: the ball has bounced on the
+/// before it is flown through; a plane over the table counts only after
+/// the bounce on the robot's half). `bounced`: the ball has bounced on the
 /// robot's half already, so its next bounce there is its second and ends
 /// the flight (the ball must be played before it).
 pub fn predict(prop: &Propagator, state: &BallState, t: f64, hit_plane_x: f64, bounced: bool) -> Prediction {
-    let stop = StopAt { t_max: t + PREDICTION_HORIZON, hit_plane_x: Some(hit_plane_x), net: true };
+    let mut stop = StopAt { t_max: t + PREDICTION_HORIZON, hit_plane_x: Some(hit_plane_x), net: true };
     let prop = &Propagator { dt: prop.dt.max(PREDICT_STEP), ..*prop };
     let (mut s, mut now) = (*state, t);
     let mut bounce = None;
@@ -86,6 +87,12 @@ pub fn predict(prop: &Propagator, state: &BallState, t: f64, hit_plane_x: f64, b
                     break FlightEnd::SecondBounce;
                 }
                 bounce = Some(Contact { t, pos: before.pos, before, after: s });
+                stop.hit_plane_x = Some(hit_plane_x);
+            }
+            // A plane over the table, reached before the bounce there: the
+            // ball is played after it (flown on past the plane).
+            Event::HitPlane { .. } if !bounced && bounce.is_none() && s.pos.x < prop.table.robot_end_x() => {
+                stop.hit_plane_x = None;
             }
             Event::HitPlane { t } => {
                 return Prediction { bounce, hit: Some(HitPoint { t, state: s }), end: FlightEnd::HitPlane };
@@ -189,6 +196,34 @@ mod tests {
             }
         }
         assert!(n >= 40, "{n} flights reach the plane");
+    }
+
+    #[test]
+    fn a_plane_over_the_table_is_met_after_the_bounce_only() {
+        let cal = Calibration::default_cell();
+        let prop = cal.propagator();
+        let s = BallState::new(Vec3::new(-1.5, 0.0, 0.3), Vec3::new(5.5, 0.0, 1.4), Vec3::new(0.0, 100.0, 0.0));
+        let behind = predict(&prop, &s, 0.0, 1.6, false);
+        let bounce = behind.bounce.expect("it bounces on the robot's half");
+        assert!((0.3..1.1).contains(&bounce.pos.x), "{bounce:?}");
+        // The same bounce (a plane's crossing splits a step of the flight).
+        let same =
+            |c: Option<Contact>| c.is_some_and(|c| (c.pos - bounce.pos).norm() < 1e-8 && (c.t - bounce.t).abs() < 1e-9);
+        // Over the table after the bounce: met there.
+        let x = bounce.pos.x + 0.2;
+        let after = predict(&prop, &s, 0.0, x, false);
+        assert!(same(after.bounce), "{after:?}");
+        let hit = after.hit.expect("it crosses the plane after its bounce");
+        assert!(hit.t > bounce.t && (hit.state.pos.x - x).abs() < 1e-9);
+        // Over the table before the bounce: flown through, and no crossing
+        // after it (the ball is past the plane).
+        let before = predict(&prop, &s, 0.0, bounce.pos.x - 0.2, false);
+        assert!(same(before.bounce), "{before:?}");
+        assert!(before.hit.is_none() && before.end == FlightEnd::Floor, "{before:?}");
+        // Behind the table, a ball that never bounces is still met.
+        let long = BallState { vel: Vec3::new(9.0, 0.0, 2.6), spin: Vec3::zeros(), ..s };
+        let p = predict(&prop, &long, 0.0, 1.6, false);
+        assert!(p.bounce.is_none() && p.hit.is_some(), "{p:?}");
     }
 
     #[test]
