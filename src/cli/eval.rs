@@ -124,6 +124,16 @@ pub struct EvalStreamArgs {
     /// lift is the world's ×0.85–1.15).
     #[arg(long)]
     pub same_lift: bool,
+    /// Where the balls come from: `launcher` (the nine settings), or real
+    /// human strokes measured right after the racket: `human-rally`,
+    /// `human-serve`, `human` (both).
+    #[arg(long, default_value_t = topspin_sim::Strokes::Launcher, value_name = "SOURCE")]
+    pub strokes: topspin_sim::Strokes,
+    /// Judge the plans on the plane x = X (m) alone, after the ball's
+    /// bounce, whether or not the arm reaches it (default: the hitting
+    /// plane of calib/strike.toml, within the arm's reach).
+    #[arg(long, value_name = "X")]
+    pub hit_plane_x: Option<f64>,
 }
 
 pub fn run(cmd: EvalCommand) -> anyhow::Result<()> {
@@ -271,6 +281,14 @@ fn run_stream(a: EvalStreamArgs) -> anyhow::Result<()> {
     if !(30.0..=2000.0).contains(&a.rate_hz) {
         return Err(BadInput(format!("--rate-hz {} must be in [30, 2000]", a.rate_hz)).into());
     }
+    if a.strokes == topspin_sim::Strokes::AimedLauncher {
+        return Err(BadInput("--strokes aimed-launcher: the stream judges the launcher as it is set".into()).into());
+    }
+    if let Some(x) = a.hit_plane_x
+        && !(x.is_finite() && x > 0.0)
+    {
+        return Err(BadInput(format!("--hit-plane-x {x} must be on the robot's side (x > 0)")).into());
+    }
     let world = match &a.world {
         Some(name) => Some(
             topspin_sim::worlds::world_named(&cal, name)
@@ -290,6 +308,8 @@ fn run_stream(a: EvalStreamArgs) -> anyhow::Result<()> {
         learn_spin: !a.no_spin_learning,
         launcher: a.launcher,
         same_lift: a.same_lift,
+        strokes: a.strokes,
+        hit_plane_x: a.hit_plane_x,
         ..Default::default()
     };
     if a.all_worlds {

@@ -100,23 +100,35 @@ pub fn simulate_in(
         };
         return (balls, redraws);
     }
-    let hit_x = cal.strike.hit_plane_x;
-    let balls = (0..n)
-        .filter_map(|k| {
-            let physics = world.map_or_else(|| cal.propagator(), |w| worlds::ball_physics(w, cal, seed, k));
-            let (mut rng_l, mut rng_t) = ball_rngs(seed, k);
-            let l = if strokes == Strokes::AimedLauncher {
-                let axis = world.map_or(SpinAxis::Perpendicular, |w| w.axis);
-                strokes::launch_into_reach(Setting::ALL[k % 9], axis, &physics, &cal.strike, &mut rng_l).ok()?
-            } else {
-                strokes::draw_human(strokes, &physics, &mut rng_l, &mut redraws)?
-            };
-            let truth = Truth::compute(&l, &physics, hit_x);
-            let observations = observe(&truth, &physics, tracker, 0.0, &mut rng_t);
-            Some(SimBall { index: k, truth, observations, physics })
-        })
-        .collect();
+    let balls = (0..n).filter_map(|k| simulate_stroke(world, strokes, cal, seed, k, tracker, &mut redraws)).collect();
     (balls, redraws)
+}
+
+/// Ball `k` of the run `seed` of `strokes` other than the launcher's
+/// presets (the aimed launcher, human strokes) in `world` (else the
+/// calibration's physics), seen by `tracker`; `None` where the aimed
+/// launcher finds no launch. States that never reach the robot's half are
+/// redrawn and counted in `redraws`.
+pub fn simulate_stroke(
+    world: Option<&worlds::World>,
+    strokes: Strokes,
+    cal: &Calibration,
+    seed: u64,
+    k: usize,
+    tracker: &TrackerModel,
+    redraws: &mut Redraws,
+) -> Option<SimBall> {
+    let physics = world.map_or_else(|| cal.propagator(), |w| worlds::ball_physics(w, cal, seed, k));
+    let (mut rng_l, mut rng_t) = ball_rngs(seed, k);
+    let l = if strokes == Strokes::AimedLauncher {
+        let axis = world.map_or(SpinAxis::Perpendicular, |w| w.axis);
+        strokes::launch_into_reach(Setting::ALL[k % 9], axis, &physics, &cal.strike, &mut rng_l).ok()?
+    } else {
+        strokes::draw_human(strokes, &physics, &mut rng_l, redraws)?
+    };
+    let truth = Truth::compute(&l, &physics, cal.strike.hit_plane_x);
+    let observations = observe(&truth, &physics, tracker, 0.0, &mut rng_t);
+    Some(SimBall { index: k, truth, observations, physics })
 }
 
 /// Shortest quiet time between one flight's end and the next launch, s.
