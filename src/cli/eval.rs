@@ -320,11 +320,16 @@ fn run_stream(a: EvalStreamArgs) -> anyhow::Result<()> {
         println!("{}", serde_json::to_string(&report)?);
         return Ok(());
     }
+    let plane = match setup.hit_plane_x {
+        Some(x) => format!(" on the plane x = {x:.2} m alone"),
+        None => String::new(),
+    };
     println!(
-        "Streaming estimator, {} balls back to back ({} with the true hit inside the hitting window, {} of \
-         them tracked), {} Hz, {} mm noise, {:.0}% dropouts, two false starts on every {}th ball; medians \
+        "Streaming estimator, {} {} balls back to back ({} with the true hit inside the hitting window{plane}, \
+         {} of them tracked), {} Hz, {} mm noise, {:.0}% dropouts, two false starts on every {}th ball; medians \
          (p90 in brackets):\n",
         report.balls,
+        setup.strokes,
         report.reachable,
         report.tracked,
         setup.rate_hz,
