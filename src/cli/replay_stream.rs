@@ -38,8 +38,7 @@ pub fn run(
     let mut cal = cal.clone();
     let mut cfg = EstimatorConfig::default().with_noise(noise);
     if let Some(x) = plane {
-        cal.strike.hit_plane_x = x;
-        cal.strike.hit_depth_x = None;
+        cal.strike = cal.strike.plane_alone(x);
         cfg.arm_reach = false;
     }
     let mut est = Estimator::new(&cal, cfg);

@@ -187,6 +187,12 @@ pub const HIT_DEPTH_STEP_M: f64 = 0.05;
 pub const MAX_HITTING_PLANES: usize = 16;
 
 impl StrikeCalib {
+    /// The same strike on the plane x = `x` alone: no hitting volume
+    /// around it (a question about where and when balls cross there).
+    pub fn plane_alone(&self, x: f64) -> StrikeCalib {
+        StrikeCalib { hit_plane_x: x, hit_depth_x: None, ..self.clone() }
+    }
+
     /// The hitting volume's depth, [lo, hi] (the nominal plane alone where
     /// none is configured).
     pub fn depth(&self) -> [f64; 2] {

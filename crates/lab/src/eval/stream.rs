@@ -62,8 +62,7 @@ impl StreamSetup {
     fn cell(&self, cal: &Calibration) -> Calibration {
         let mut cal = cal.clone();
         if let Some(x) = self.hit_plane_x {
-            cal.strike.hit_plane_x = x;
-            cal.strike.hit_depth_x = None;
+            cal.strike = cal.strike.plane_alone(x);
         }
         cal
     }
@@ -262,10 +261,7 @@ pub(crate) fn run_estimator(
 ) -> (Vec<Planned>, SessionLearned) {
     // The prediction's accuracy on the hitting plane, judged there: the
     // volume's other planes are the stroke's business (the virtual cell).
-    let plane_only = Calibration {
-        strike: topspin_core::calib::StrikeCalib { hit_depth_x: None, ..cal.strike.clone() },
-        ..cal.clone()
-    };
+    let plane_only = Calibration { strike: cal.strike.plane_alone(cal.strike.hit_plane_x), ..cal.clone() };
     let mut est = Estimator::new(&plane_only, cfg);
     let mut plans = Vec::new();
     for (k, (ball, &t0)) in balls.iter().zip(launches).enumerate() {
